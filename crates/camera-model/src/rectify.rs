@@ -1,0 +1,576 @@
+//! Output pinhole cameras (`crop`, `full`, `none`, explicit) and rectification maps.
+
+use crate::model::fov_undistort_radius;
+use crate::{CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode};
+
+/// Computes the output pinhole camera for `mode` at `out_size`.
+///
+/// For the FOV model `crop` and `full` use the reference tools' closed form (axis extents,
+/// respectively corner extents, mapped through `T(x) = tan(x omega) / (2 tan(omega / 2))`).
+/// For the other models they are found numerically: `crop` is the largest centred rectangle
+/// (a uniform shrink of the axis extents) whose every output pixel maps inside the input;
+/// `full` is the bounding box of the input border.
+pub fn output_intrinsics(
+    input: &CameraModel,
+    in_size: ImageSize,
+    mode: &OutputMode,
+    out_size: ImageSize,
+) -> Result<Intrinsics, CameraError> {
+    let in_size = in_size.validate()?;
+    let out_size = out_size.validate()?;
+    let (w, h) = (in_size.width as f64, in_size.height as f64);
+    let (ow, oh) = (out_size.width as f64, out_size.height as f64);
+    match mode {
+        OutputMode::Pinhole(v) => Ok(crate::camera_file::intrinsics_from_file_values(
+            *v, out_size,
+        )),
+        OutputMode::None => {
+            if input.is_pinhole() {
+                Ok(input
+                    .rescaled(
+                        (in_size.width, in_size.height),
+                        (out_size.width, out_size.height),
+                    )
+                    .intrinsics())
+            } else {
+                Err(CameraError::NoneNeedsPinhole {
+                    model: input.name(),
+                })
+            }
+        }
+        _ if input.is_pinhole() => {
+            // A pinhole input has nothing to undistort: crop and full are a plain resize.
+            Ok(input
+                .rescaled(
+                    (in_size.width, in_size.height),
+                    (out_size.width, out_size.height),
+                )
+                .intrinsics())
+        }
+        OutputMode::Crop => {
+            if let CameraModel::Fov { k, omega } = input {
+                let t = |x: f64| fov_undistort_radius(*omega, x);
+                let (l, r) = (k.cx / k.fx, (w - 1.0 - k.cx) / k.fx);
+                let (tp, b) = (k.cy / k.fy, (h - 1.0 - k.cy) / k.fy);
+                if let (Some(tl), Some(tr), Some(tt), Some(tb)) = (t(l), t(r), t(tp), t(b)) {
+                    if l > 0.0 && r > 0.0 && tp > 0.0 && b > 0.0 {
+                        let fx = k.fx * ((l + r) / (tl + tr)) * (ow / w);
+                        let fy = k.fy * ((tp + b) / (tt + tb)) * (oh / h);
+                        return Ok(Intrinsics {
+                            fx,
+                            fy,
+                            cx: tl * fx,
+                            cy: tt * fy,
+                        });
+                    }
+                }
+            }
+            crop_numeric(input, in_size, out_size)
+        }
+        OutputMode::Full => {
+            if let CameraModel::Fov { k, omega } = input {
+                let t = |x: f64| fov_undistort_radius(*omega, x);
+                let (l, r) = (k.cx / k.fx, (w - 1.0 - k.cx) / k.fx);
+                let (tp, b) = (k.cy / k.fy, (h - 1.0 - k.cy) / k.fy);
+                let tl_r = l.hypot(tp);
+                let tr_r = r.hypot(tp);
+                let bl_r = l.hypot(b);
+                let br_r = r.hypot(b);
+                if let (Some(ttl), Some(ttr), Some(tbl), Some(tbr)) =
+                    (t(tl_r), t(tr_r), t(bl_r), t(br_r))
+                {
+                    if l > 0.0 && r > 0.0 && tp > 0.0 && b > 0.0 {
+                        let hor = br_r.max(tr_r) + bl_r.max(tl_r);
+                        let vert = tr_r.max(tl_r) + bl_r.max(br_r);
+                        let t_hor = tbr.max(ttr) + tbl.max(ttl);
+                        let t_vert = ttr.max(ttl) + tbl.max(tbr);
+                        let fy = k.fy * (vert / t_vert) * (oh / h);
+                        let fx = k.fx * (hor / t_hor) * (ow / w);
+                        let cy = (ttl / tl_r).max(ttr / tr_r) * fy * k.cy / k.fy;
+                        let cx = (tbl / bl_r).max(ttl / tl_r) * fx * k.cx / k.fx;
+                        return Ok(Intrinsics { fx, fy, cx, cy });
+                    }
+                }
+                let (u, v) = first_unbounded_border_pixel(input, in_size);
+                return Err(CameraError::FullUnbounded {
+                    model: input.name(),
+                    u,
+                    v,
+                });
+            }
+            full_numeric(input, in_size, out_size)
+        }
+    }
+}
+
+/// Pixels along the border of an image, every pixel once.
+fn border_pixels(size: ImageSize) -> impl Iterator<Item = [f64; 2]> {
+    let (w, h) = (size.width, size.height);
+    let top = (0..w).map(move |x| [x as f64, 0.0]);
+    let bottom = (0..w).map(move |x| [x as f64, (h - 1) as f64]);
+    let left = (1..h - 1).map(move |y| [0.0, y as f64]);
+    let right = (1..h - 1).map(move |y| [(w - 1) as f64, y as f64]);
+    top.chain(bottom).chain(left).chain(right)
+}
+
+fn first_unbounded_border_pixel(input: &CameraModel, in_size: ImageSize) -> (f64, f64) {
+    border_pixels(in_size)
+        .find(|p| input.unproject_normalized(*p).is_none())
+        .map_or((0.0, 0.0), |p| (p[0], p[1]))
+}
+
+/// The DSO convention for a normalised rectangle `[x0, x1] x [y0, y1]`: its edges land on the
+/// centres of the first and last output pixels.
+fn k_from_rect(rect: [f64; 4], out: ImageSize) -> Intrinsics {
+    let [x0, x1, y0, y1] = rect;
+    let fx = (out.width as f64 - 1.0) / (x1 - x0);
+    let fy = (out.height as f64 - 1.0) / (y1 - y0);
+    Intrinsics {
+        fx,
+        fy,
+        cx: -x0 * fx,
+        cy: -y0 * fy,
+    }
+}
+
+fn full_numeric(
+    input: &CameraModel,
+    in_size: ImageSize,
+    out_size: ImageSize,
+) -> Result<Intrinsics, CameraError> {
+    let mut rect = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for p in border_pixels(in_size) {
+        let n = input
+            .unproject_normalized(p)
+            .ok_or(CameraError::FullUnbounded {
+                model: input.name(),
+                u: p[0],
+                v: p[1],
+            })?;
+        rect[0] = rect[0].min(n[0]);
+        rect[1] = rect[1].max(n[0]);
+        rect[2] = rect[2].min(n[1]);
+        rect[3] = rect[3].max(n[1]);
+    }
+    if !(rect[1] > rect[0] && rect[3] > rect[2]) {
+        return Err(CameraError::FullUnbounded {
+            model: input.name(),
+            u: 0.0,
+            v: 0.0,
+        });
+    }
+    Ok(k_from_rect(rect, out_size))
+}
+
+/// Whether the pixel `src` lies where the bilinear remap can sample it.
+#[inline]
+fn inside(src: [f64; 2], size: ImageSize) -> bool {
+    src[0] >= 0.0
+        && src[1] >= 0.0
+        && src[0] <= (size.width - 1) as f64
+        && src[1] <= (size.height - 1) as f64
+}
+
+/// Farthest normalised coordinate along a ray from the principal point (direction `dir` in
+/// pixels) that still unprojects in front of the camera, searched on the pixel segment.
+fn axis_extent(input: &CameraModel, in_size: ImageSize, dir: [f64; 2]) -> Option<f64> {
+    let k = input.intrinsics();
+    let (w, h) = ((in_size.width - 1) as f64, (in_size.height - 1) as f64);
+    let start = [k.cx.clamp(0.0, w), k.cy.clamp(0.0, h)];
+    // distance to the image edge along dir
+    let mut t_max = f64::INFINITY;
+    for i in 0..2 {
+        let lim = if i == 0 { w } else { h };
+        if dir[i] > 0.0 {
+            t_max = t_max.min((lim - start[i]) / dir[i]);
+        } else if dir[i] < 0.0 {
+            t_max = t_max.min(-start[i] / dir[i]);
+        }
+    }
+    let at = |t: f64| input.unproject_normalized([start[0] + t * dir[0], start[1] + t * dir[1]]);
+    let comp = |n: [f64; 2]| if dir[0] != 0.0 { n[0] } else { n[1] };
+    if let Some(n) = at(t_max) {
+        return Some(comp(n));
+    }
+    let (mut lo, mut hi) = (0.0, t_max);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if at(mid).is_some() {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    at(lo).map(comp)
+}
+
+fn crop_numeric(
+    input: &CameraModel,
+    in_size: ImageSize,
+    out_size: ImageSize,
+) -> Result<Intrinsics, CameraError> {
+    let fail = |reason: &str| CameraError::NoValidCrop {
+        model: input.name(),
+        reason: reason.into(),
+    };
+    let x0 = axis_extent(input, in_size, [-1.0, 0.0]).ok_or_else(|| fail("left axis"))?;
+    let x1 = axis_extent(input, in_size, [1.0, 0.0]).ok_or_else(|| fail("right axis"))?;
+    let y0 = axis_extent(input, in_size, [0.0, -1.0]).ok_or_else(|| fail("top axis"))?;
+    let y1 = axis_extent(input, in_size, [0.0, 1.0]).ok_or_else(|| fail("bottom axis"))?;
+    if !(x0 < 0.0 && x1 > 0.0 && y0 < 0.0 && y1 > 0.0) {
+        return Err(fail("the principal point is not inside the image"));
+    }
+    let base = [x0, x1, y0, y1];
+    let scaled = |s: f64| k_from_rect([s * x0, s * x1, s * y0, s * y1], out_size);
+    let border_ok = |k: &Intrinsics| {
+        let out = Intrinsics { ..*k };
+        border_pixels(out_size).all(|p| {
+            input
+                .project_normalized(out.pixel_to_normalized(p))
+                .is_some_and(|src| inside(src, in_size))
+        })
+    };
+    let mut s = 1.0;
+    if !border_ok(&scaled(1.0)) {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..50 {
+            let mid = 0.5 * (lo + hi);
+            if border_ok(&scaled(mid)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        s = lo;
+    }
+    // The border test implies the interior for well-behaved models; verify every pixel and
+    // shrink further if a strongly distorted model folds inward.
+    for _ in 0..200 {
+        if s <= 0.0 {
+            break;
+        }
+        let k = scaled(s);
+        let map = RectifyMap::new(input, in_size, k, out_size)?;
+        if map.invalid_count() == 0 {
+            return Ok(k);
+        }
+        s *= 0.995;
+    }
+    Err(fail(&format!(
+        "no centred rectangle inside the image (axis extents {base:?})"
+    )))
+}
+
+/// Bits of the fixed-point bilinear weights of the 8-bit remap.
+const FRAC_BITS: u32 = 8;
+const FRAC_ONE: u32 = 1 << FRAC_BITS;
+
+/// A precomputed map from every output pixel to its bilinear source in the input image.
+///
+/// Each output pixel stores the index of the top-left source pixel and the fractional offsets,
+/// as `f32` for float images and as 8-bit fixed point for `u8` images. Output pixels whose
+/// source falls outside `[0, w-1] x [0, h-1]` are invalid: the remap writes `0` (u8) or NaN
+/// (f32) there and [`RectifyMap::valid_mask`] tells which they are.
+#[derive(Clone, Debug)]
+pub struct RectifyMap {
+    input: ImageSize,
+    output: ImageSize,
+    camera: Intrinsics,
+    index: Vec<u32>,
+    frac: Vec<[f32; 2]>,
+    fixed: Vec<FixedEntry>,
+    invalid: usize,
+}
+
+/// One output pixel of the 8-bit remap: source index and the four bilinear weights in 8-bit
+/// fixed point, summing to exactly 256 so that the weighted sum fits 16 bits.
+#[derive(Clone, Copy, Debug)]
+struct FixedEntry {
+    index: u32,
+    w: [u16; 4],
+}
+
+impl FixedEntry {
+    const INVALID: FixedEntry = FixedEntry {
+        index: u32::MAX,
+        w: [0; 4],
+    };
+
+    fn new(index: u32, fx: f64, fy: f64) -> FixedEntry {
+        let one = FRAC_ONE as f64;
+        let w11 = (fx * fy * one).round();
+        let w01 = (fx * one).round() - w11;
+        let w10 = (fy * one).round() - w11;
+        let mut w = [one - w01 - w10 - w11, w01, w10, w11];
+        // Rounding can push the smallest weight to -1; move that unit to the largest one so
+        // the weights stay non-negative and sum to exactly 256.
+        for i in 0..4 {
+            if w[i] < 0.0 {
+                let deficit = -w[i];
+                w[i] = 0.0;
+                let j = (0..4).fold(0, |m, k| if w[k] > w[m] { k } else { m });
+                w[j] -= deficit;
+            }
+        }
+        FixedEntry {
+            index,
+            w: w.map(|v| v as u16),
+        }
+    }
+}
+
+impl RectifyMap {
+    /// Builds the map from the output pinhole `out_camera` of size `out_size` to `input`.
+    pub fn new(
+        input: &CameraModel,
+        in_size: ImageSize,
+        out_camera: Intrinsics,
+        out_size: ImageSize,
+    ) -> Result<RectifyMap, CameraError> {
+        let in_size = in_size.validate()?;
+        let out_size = out_size.validate()?;
+        let n = out_size.pixels();
+        let mut index = Vec::with_capacity(n);
+        let mut frac = Vec::with_capacity(n);
+        let mut fixed = Vec::with_capacity(n);
+        let mut invalid = 0;
+        let (wm1, hm1) = (in_size.width - 1, in_size.height - 1);
+        for v in 0..out_size.height {
+            for u in 0..out_size.width {
+                let nrm = out_camera.pixel_to_normalized([u as f64, v as f64]);
+                match input.project_normalized(nrm) {
+                    Some(src) if inside(src, in_size) => {
+                        // Keep x0 <= w-2 so that x0 + 1 is in the image; x == w-1 gives fx = 1.
+                        let x0 = (src[0].floor() as usize).min(wm1 - 1);
+                        let y0 = (src[1].floor() as usize).min(hm1 - 1);
+                        let fx = src[0] - x0 as f64;
+                        let fy = src[1] - y0 as f64;
+                        let i = (y0 * in_size.width + x0) as u32;
+                        index.push(i);
+                        frac.push([fx as f32, fy as f32]);
+                        fixed.push(FixedEntry::new(i, fx, fy));
+                    }
+                    _ => {
+                        invalid += 1;
+                        index.push(u32::MAX);
+                        frac.push([0.0, 0.0]);
+                        fixed.push(FixedEntry::INVALID);
+                    }
+                }
+            }
+        }
+        Ok(RectifyMap {
+            input: in_size,
+            output: out_size,
+            camera: out_camera,
+            index,
+            frac,
+            fixed,
+            invalid,
+        })
+    }
+
+    /// Builds the map for the output requested by `mode` (see [`output_intrinsics`]).
+    pub fn for_mode(
+        input: &CameraModel,
+        in_size: ImageSize,
+        mode: &OutputMode,
+        out_size: ImageSize,
+    ) -> Result<RectifyMap, CameraError> {
+        let k = output_intrinsics(input, in_size, mode, out_size)?;
+        RectifyMap::new(input, in_size, k, out_size)
+    }
+
+    /// The output pinhole camera.
+    pub fn camera(&self) -> Intrinsics {
+        self.camera
+    }
+
+    /// The input image size.
+    pub fn input_size(&self) -> ImageSize {
+        self.input
+    }
+
+    /// The output image size.
+    pub fn output_size(&self) -> ImageSize {
+        self.output
+    }
+
+    /// Number of output pixels whose source falls outside the input image.
+    pub fn invalid_count(&self) -> usize {
+        self.invalid
+    }
+
+    /// `true` for output pixels that have a source in the input image.
+    pub fn valid_mask(&self) -> Image<bool> {
+        Image::from_fn(self.output.width, self.output.height, |x, y| {
+            self.index[y * self.output.width + x] != u32::MAX
+        })
+    }
+
+    /// The source position (input pixel coordinates) of output pixel `(u, v)`, if valid.
+    pub fn source(&self, u: usize, v: usize) -> Option<[f64; 2]> {
+        if u >= self.output.width || v >= self.output.height {
+            return None;
+        }
+        let i = v * self.output.width + u;
+        let idx = self.index[i];
+        if idx == u32::MAX {
+            return None;
+        }
+        let idx = idx as usize;
+        let f = self.frac[i];
+        Some([
+            (idx % self.input.width) as f64 + f[0] as f64,
+            (idx / self.input.width) as f64 + f[1] as f64,
+        ])
+    }
+
+    fn check_input<T: Copy>(&self, src: &Image<T>) -> Result<(), CameraError> {
+        if src.size() != (self.input.width, self.input.height) {
+            return Err(CameraError::ImageSizeMismatch {
+                width: self.input.width,
+                height: self.input.height,
+                got_width: src.width(),
+                got_height: src.height(),
+            });
+        }
+        Ok(())
+    }
+
+    fn check_output<T: Copy>(&self, dst: &Image<T>) -> Result<(), CameraError> {
+        if dst.size() != (self.output.width, self.output.height) {
+            return Err(CameraError::ImageSizeMismatch {
+                width: self.output.width,
+                height: self.output.height,
+                got_width: dst.width(),
+                got_height: dst.height(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Bilinear remap of an 8-bit image with 8-bit fixed-point weights, rounded to nearest
+    /// (within one grey level of the exact interpolation); invalid pixels are 0.
+    pub fn remap_u8(&self, src: &Image<u8>) -> Result<Image<u8>, CameraError> {
+        let mut out = Image::filled(self.output.width, self.output.height, 0u8);
+        self.remap_u8_into(src, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`RectifyMap::remap_u8`] into an existing output image (no allocation).
+    pub fn remap_u8_into(&self, src: &Image<u8>, dst: &mut Image<u8>) -> Result<(), CameraError> {
+        self.check_input(src)?;
+        self.check_output(dst)?;
+        let s = src.data();
+        let w = self.input.width;
+        let out = dst.data_mut();
+        for (o, e) in out.iter_mut().zip(&self.fixed) {
+            let i = e.index as usize;
+            // Only the invalid marker u32::MAX fails this test; it also lets the compiler drop
+            // the four bounds checks below.
+            if i + w + 1 >= s.len() {
+                *o = 0;
+                continue;
+            }
+            let v = s[i] as u16 * e.w[0]
+                + s[i + 1] as u16 * e.w[1]
+                + s[i + w] as u16 * e.w[2]
+                + s[i + w + 1] as u16 * e.w[3];
+            // v <= 255 * 256, so adding half a unit cannot overflow
+            *o = ((v as u32 + (1 << (FRAC_BITS - 1))) >> FRAC_BITS) as u8;
+        }
+        Ok(())
+    }
+
+    /// Bilinear remap of a float image; invalid pixels are NaN.
+    pub fn remap_f32(&self, src: &Image<f32>) -> Result<Image<f32>, CameraError> {
+        let mut out = Image::filled(self.output.width, self.output.height, 0f32);
+        self.remap_f32_into(src, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`RectifyMap::remap_f32`] into an existing output image (no allocation).
+    pub fn remap_f32_into(
+        &self,
+        src: &Image<f32>,
+        dst: &mut Image<f32>,
+    ) -> Result<(), CameraError> {
+        self.check_input(src)?;
+        self.check_output(dst)?;
+        let s = src.data();
+        let w = self.input.width;
+        let out = dst.data_mut();
+        for ((o, &idx), &[fx, fy]) in out.iter_mut().zip(&self.index).zip(&self.frac) {
+            if idx == u32::MAX {
+                *o = f32::NAN;
+                continue;
+            }
+            let i = idx as usize;
+            let top = s[i] + fx * (s[i + 1] - s[i]);
+            let bottom = s[i + w] + fx * (s[i + w + 1] - s[i + w]);
+            *o = top + fy * (bottom - top);
+        }
+        Ok(())
+    }
+
+    /// Bilinear remap of an 8-bit image straight to float, with a per-value lookup table
+    /// applied to the four source pixels before interpolation (for example the inverse
+    /// response). Invalid pixels are NaN.
+    pub fn remap_u8_lut_into(
+        &self,
+        src: &Image<u8>,
+        lut: &[f32; 256],
+        dst: &mut Image<f32>,
+    ) -> Result<(), CameraError> {
+        self.check_input(src)?;
+        self.check_output(dst)?;
+        let s = src.data();
+        let w = self.input.width;
+        let out = dst.data_mut();
+        for ((o, &idx), &[fx, fy]) in out.iter_mut().zip(&self.index).zip(&self.frac) {
+            if idx == u32::MAX {
+                *o = f32::NAN;
+                continue;
+            }
+            let i = idx as usize;
+            let (a, b) = (lut[s[i] as usize], lut[s[i + 1] as usize]);
+            let (c, d) = (lut[s[i + w] as usize], lut[s[i + w + 1] as usize]);
+            let top = a + fx * (b - a);
+            let bottom = c + fx * (d - c);
+            *o = top + fy * (bottom - top);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FixedEntry;
+
+    #[test]
+    fn fixed_point_weights_are_non_negative_and_sum_to_256() {
+        for i in 0..=200 {
+            for j in 0..=200 {
+                let (fx, fy) = (i as f64 / 200.0, j as f64 / 200.0);
+                let e = FixedEntry::new(0, fx, fy);
+                assert_eq!(e.w.iter().map(|&w| w as u32).sum::<u32>(), 256);
+                // each weight within one unit of the exact bilinear weight
+                let exact = [
+                    (1.0 - fx) * (1.0 - fy),
+                    fx * (1.0 - fy),
+                    (1.0 - fx) * fy,
+                    fx * fy,
+                ];
+                for (w, x) in e.w.iter().zip(exact) {
+                    assert!((*w as f64 - x * 256.0).abs() <= 1.5, "{fx} {fy} {:?}", e.w);
+                }
+            }
+        }
+    }
+}

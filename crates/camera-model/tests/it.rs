@@ -1,0 +1,7 @@
+//! Integration tests of camera-model: one binary, one module per topic.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+mod file;
+mod models;
+mod rectify;

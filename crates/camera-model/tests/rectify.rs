@@ -1,0 +1,253 @@
+//! Output cameras (DESIGN.md test vectors) and rectification maps.
+use crate::common::{all_models, dataset_camera};
+use camera_model::{
+    output_intrinsics, CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode,
+    RectifyMap,
+};
+
+/// DESIGN.md: the dataset camera at 1280x1024 to 640x480. Tolerance 1e-3 px, the precision
+/// the reference numbers are given to.
+#[test]
+fn fov_crop_and_full_match_the_reference_test_vectors() {
+    let f = dataset_camera();
+    let out = ImageSize::new(640, 480);
+    let crop = output_intrinsics(&f.input, f.input_size, &OutputMode::Crop, out).unwrap();
+    for (got, want) in [
+        (crop.fx, 277.524),
+        (crop.fy, 291.680),
+        (crop.cx, 312.474),
+        (crop.cy, 240.036),
+    ] {
+        assert!((got - want).abs() < 1e-3, "crop: got {got}, want {want}");
+    }
+    let map = RectifyMap::new(&f.input, f.input_size, crop, out).unwrap();
+    assert_eq!(map.invalid_count(), 0, "crop must leave no invalid pixel");
+    let full = output_intrinsics(&f.input, f.input_size, &OutputMode::Full, out).unwrap();
+    for (got, want) in [
+        (full.fx, 214.536),
+        (full.fy, 198.679),
+        (full.cx, 311.353),
+        (full.cy, 240.083),
+    ] {
+        assert!((got - want).abs() < 1e-3, "full: got {got}, want {want}");
+    }
+}
+
+/// `full` keeps the whole input field of view: every input border pixel centre lands inside
+/// the output image area `[-0.5, W-0.5] x [-0.5, H-0.5]`. Tolerance 0.5 px for the FOV model,
+/// whose closed form is the reference tool's (DESIGN.md's test vector): it scales by `W/w`
+/// and mixes corner radii, which puts the far corner 0.04 px past the edge at 640x480 and
+/// 0.27 px at 320x320; 1e-6 px for the numeric search of the other models.
+fn assert_full_keeps_border(model: &CameraModel, size: ImageSize, k: Intrinsics, out: ImageSize) {
+    let mut worst: f64 = f64::NEG_INFINITY;
+    for x in 0..size.width {
+        for y in [0, size.height - 1] {
+            let n = model.unproject_normalized([x as f64, y as f64]).unwrap();
+            let p = k.normalized_to_pixel(n);
+            worst = worst.max(-0.5 - p[0]).max(p[0] - (out.width as f64 - 0.5));
+            worst = worst.max(-0.5 - p[1]).max(p[1] - (out.height as f64 - 0.5));
+        }
+    }
+    for y in 0..size.height {
+        for x in [0, size.width - 1] {
+            let n = model.unproject_normalized([x as f64, y as f64]).unwrap();
+            let p = k.normalized_to_pixel(n);
+            worst = worst.max(-0.5 - p[0]).max(p[0] - (out.width as f64 - 0.5));
+            worst = worst.max(-0.5 - p[1]).max(p[1] - (out.height as f64 - 0.5));
+        }
+    }
+    let tol = if model.name() == "FOV" { 0.5 } else { 1e-6 };
+    assert!(
+        worst <= tol,
+        "{}: border pixel {worst} px outside the output",
+        model.name()
+    );
+}
+
+#[test]
+fn crop_has_no_invalid_pixel_and_full_keeps_the_field_of_view_for_every_model() {
+    for (model, size) in all_models() {
+        for out in [ImageSize::new(640, 480), ImageSize::new(320, 320), size] {
+            let crop = output_intrinsics(&model, size, &OutputMode::Crop, out).unwrap();
+            let map = RectifyMap::new(&model, size, crop, out).unwrap();
+            assert_eq!(map.invalid_count(), 0, "{} crop to {out}", model.name());
+            if let Ok(full) = output_intrinsics(&model, size, &OutputMode::Full, out) {
+                assert_full_keeps_border(&model, size, full, out);
+                // full sees at least as much as crop
+                assert!(full.fx <= crop.fx * (out.width as f64 + 1.0) / out.width as f64);
+            } else {
+                assert!(matches!(
+                    model,
+                    CameraModel::EquiDistant { .. } | CameraModel::KannalaBrandt { .. }
+                ));
+            }
+        }
+    }
+}
+
+#[test]
+fn none_keeps_a_pinhole_and_refuses_a_fisheye() {
+    let k = Intrinsics {
+        fx: 320.0,
+        fy: 310.0,
+        cx: 319.5,
+        cy: 239.5,
+    };
+    let pin = CameraModel::Pinhole(k);
+    let same = output_intrinsics(
+        &pin,
+        ImageSize::new(640, 480),
+        &OutputMode::None,
+        ImageSize::new(640, 480),
+    )
+    .unwrap();
+    assert_eq!(same, k);
+    let half = output_intrinsics(
+        &pin,
+        ImageSize::new(640, 480),
+        &OutputMode::None,
+        ImageSize::new(320, 240),
+    )
+    .unwrap();
+    assert_eq!(
+        (half.fx, half.fy, half.cx, half.cy),
+        (160.0, 155.0, 159.5, 119.5)
+    );
+    let f = dataset_camera();
+    let e =
+        output_intrinsics(&f.input, f.input_size, &OutputMode::None, f.output_size).unwrap_err();
+    assert!(matches!(e, CameraError::NoneNeedsPinhole { model: "FOV" }));
+}
+
+#[test]
+fn explicit_pinhole_is_relative_to_the_output_size() {
+    let f = dataset_camera();
+    let out = ImageSize::new(640, 480);
+    let k = output_intrinsics(
+        &f.input,
+        f.input_size,
+        &OutputMode::Pinhole([0.5, 0.6, 0.5, 0.5]),
+        out,
+    )
+    .unwrap();
+    assert_eq!((k.fx, k.fy, k.cx, k.cy), (320.0, 288.0, 319.5, 239.5));
+    let k = output_intrinsics(
+        &f.input,
+        f.input_size,
+        &OutputMode::Pinhole([300.0, 300.0, 320.0, 240.0]),
+        out,
+    )
+    .unwrap();
+    assert_eq!((k.fx, k.cx), (300.0, 320.0));
+}
+
+/// The remap of a smooth synthetic image equals the analytic function at the analytically
+/// projected source position. Tolerance 0.045 at worst: the bilinear interpolation error is
+/// at most (|f_xx| + |f_yy|) / 8 = (50/15^2 + 50/21^2) / 8 = 0.042; RMS below 0.02.
+#[test]
+fn remap_matches_the_analytic_projection() {
+    let f = dataset_camera();
+    let g = |x: f64, y: f64| 100.0 + 50.0 * (x / 15.0).sin() * (y / 21.0).cos();
+    let raw = Image::from_fn(1280, 1024, |x, y| g(x as f64, y as f64) as f32);
+    let map =
+        RectifyMap::for_mode(&f.input, f.input_size, &OutputMode::Crop, f.output_size).unwrap();
+    let out = map.remap_f32(&raw).unwrap();
+    let k = map.camera();
+    let (mut sum, mut n) = (0.0, 0.0);
+    for v in (0..480).step_by(3) {
+        for u in (0..640).step_by(3) {
+            let src = f
+                .input
+                .project_normalized(k.pixel_to_normalized([u as f64, v as f64]))
+                .unwrap();
+            let err = (out.get(u, v).unwrap() as f64 - g(src[0], src[1])).abs();
+            assert!(err < 0.045, "({u},{v}) err {err}");
+            sum += err * err;
+            n += 1.0;
+        }
+    }
+    assert!((sum / n).sqrt() < 0.02);
+    // the 8-bit remap agrees with the float one to rounding
+    let raw8 = raw.map(|v| v.round() as u8);
+    let out8 = map.remap_u8(&raw8).unwrap();
+    let outf = map.remap_f32(&raw8.map(|v| v as f32)).unwrap();
+    for (a, b) in out8.data().iter().zip(outf.data()) {
+        assert!((*a as f32 - b).abs() <= 1.0, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn invalid_pixels_are_zero_or_nan_and_masked() {
+    let f = dataset_camera();
+    // a very wide explicit pinhole sees beyond the raw image
+    let map = RectifyMap::for_mode(
+        &f.input,
+        f.input_size,
+        &OutputMode::Pinhole([0.1, 0.1, 0.5, 0.5]),
+        ImageSize::new(64, 48),
+    )
+    .unwrap();
+    assert!(map.invalid_count() > 0);
+    let mask = map.valid_mask();
+    let out = map.remap_u8(&Image::filled(1280, 1024, 200u8)).unwrap();
+    let outf = map.remap_f32(&Image::filled(1280, 1024, 2.0f32)).unwrap();
+    let mut invalid = 0;
+    for i in 0..64 * 48 {
+        if mask.data()[i] {
+            assert_eq!(out.data()[i], 200);
+            assert!((outf.data()[i] - 2.0).abs() < 1e-6);
+        } else {
+            invalid += 1;
+            assert_eq!(out.data()[i], 0);
+            assert!(outf.data()[i].is_nan());
+        }
+    }
+    assert_eq!(invalid, map.invalid_count());
+    assert!(mask.get(32, 24).unwrap());
+    assert!(!mask.get(0, 0).unwrap());
+}
+
+#[test]
+fn remap_refuses_images_of_the_wrong_size() {
+    let f = dataset_camera();
+    let map = RectifyMap::for_mode(
+        &f.input,
+        f.input_size,
+        &OutputMode::Crop,
+        ImageSize::new(64, 48),
+    )
+    .unwrap();
+    let e = map.remap_u8(&Image::filled(640, 480, 0u8)).unwrap_err();
+    assert!(matches!(
+        e,
+        CameraError::ImageSizeMismatch {
+            width: 1280,
+            height: 1024,
+            ..
+        }
+    ));
+    assert!(RectifyMap::for_mode(
+        &f.input,
+        f.input_size,
+        &OutputMode::Crop,
+        ImageSize::new(1, 48)
+    )
+    .is_err());
+}
+
+/// Borders: source coordinates exactly at w-1 / h-1 are valid and interpolate to the last pixel.
+#[test]
+fn identity_map_reproduces_the_image_exactly() {
+    let k = Intrinsics {
+        fx: 50.0,
+        fy: 50.0,
+        cx: 15.5,
+        cy: 9.5,
+    };
+    let m = CameraModel::Pinhole(k);
+    let size = ImageSize::new(32, 20);
+    let map = RectifyMap::for_mode(&m, size, &OutputMode::None, size).unwrap();
+    assert_eq!(map.invalid_count(), 0);
+    let img = Image::from_fn(32, 20, |x, y| (x * 7 + y * 3) as u8);
+    assert_eq!(map.remap_u8(&img).unwrap(), img);
+}

@@ -1,0 +1,40 @@
+//! `monovo`: read, rectify, calibrate and evaluate the TUM monoVO benchmark.
+//!
+//! The binary is thin: it parses arguments, calls the library crates and prints.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// monovo: the photometrically calibrated monocular VO benchmark, as one fast command.
+///
+/// Read and rectify the benchmark's sequences, calibrate response and vignetting of your own
+/// camera, and score trajectories with the paper's loop-closure drift metrics.
+#[derive(Parser, Debug)]
+#[command(name = "monovo", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Show a camera.txt: the input model and the output pinhole camera it rectifies to.
+    Camera(cmd::camera::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Camera(args) => cmd::camera::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("monovo: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,130 @@
+//! Developer tasks of the monovo workspace: `cargo xtask bench-synthetic [--quick] [--json FILE]`.
+//!
+//! bench-synthetic runs every stage on synthetic data with known truth, prints accuracy
+//! against the truth and throughput / wall time / peak memory per stage, and fails when a
+//! figure is worse than the thresholds committed in `xtask/thresholds.json`.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod stages;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+
+/// One measured figure of a stage.
+pub struct Figure {
+    /// `stage.name`, the key in thresholds.json.
+    pub key: String,
+    /// The measured value.
+    pub value: f64,
+    /// Unit for display.
+    pub unit: &'static str,
+    /// Whether smaller is better (errors, times, memory) or larger (throughput).
+    pub lower_is_better: bool,
+}
+
+impl Figure {
+    /// A figure where smaller is better.
+    pub fn lower(key: &str, value: f64, unit: &'static str) -> Figure {
+        Figure {
+            key: key.into(),
+            value,
+            unit,
+            lower_is_better: true,
+        }
+    }
+}
+
+fn usage() -> &'static str {
+    "usage: cargo xtask bench-synthetic [--quick] [--json FILE]\n\n\
+     Runs every stage on synthetic data, prints accuracy, speed and memory, and fails when a\n\
+     figure is worse than xtask/thresholds.json. --quick is the CI variant (smaller data)."
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
+    let mut args = std::env::args().skip(1);
+    let Some(task) = args.next() else {
+        println!("{}", usage());
+        return Ok(());
+    };
+    if task != "bench-synthetic" {
+        bail!("unknown task `{task}`\n{}", usage());
+    }
+    let mut quick = false;
+    let mut json: Option<PathBuf> = None;
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--quick" => quick = true,
+            "--json" => json = Some(args.next().context("--json needs a file")?.into()),
+            "-h" | "--help" => {
+                println!("{}", usage());
+                return Ok(());
+            }
+            other => bail!("unknown argument `{other}`\n{}", usage()),
+        }
+    }
+    let thresholds_path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("thresholds.json");
+    let thresholds: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&thresholds_path)
+            .with_context(|| format!("reading {}", thresholds_path.display()))?,
+    )
+    .with_context(|| format!("parsing {}", thresholds_path.display()))?;
+    let mode = if quick { "quick" } else { "full" };
+    let figures = stages::run_all(quick)?;
+    println!(
+        "\n{:<44} {:>14} {:>14}  status",
+        "figure", "value", "threshold"
+    );
+    let mut failed = Vec::new();
+    let mut out = serde_json::Map::new();
+    for f in &figures {
+        let limit = thresholds
+            .get(mode)
+            .and_then(|m| m.get(&f.key))
+            .and_then(|v| v.as_f64());
+        let ok = match limit {
+            Some(l) if f.lower_is_better => f.value <= l,
+            Some(l) => f.value >= l,
+            None => true,
+        };
+        if !ok {
+            failed.push(f.key.clone());
+        }
+        let lim = limit.map_or("-".to_string(), |l| format!("{l:.4}"));
+        println!(
+            "{:<44} {:>10.4} {:<3} {:>14}  {}",
+            f.key,
+            f.value,
+            f.unit,
+            lim,
+            if ok { "ok" } else { "WORSE" }
+        );
+        out.insert(
+            f.key.clone(),
+            serde_json::json!({"value": f.value, "unit": f.unit, "threshold": limit}),
+        );
+    }
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&out)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if !failed.is_empty() {
+        bail!(
+            "{} figure(s) worse than their threshold: {}",
+            failed.len(),
+            failed.join(", ")
+        );
+    }
+    Ok(())
+}
