@@ -101,11 +101,16 @@ fn run() -> Result<()> {
         if !ok {
             failed.push(f.key.clone());
         }
-        let lim = limit.map_or("-".to_string(), |l| format!("{l:.4}"));
+        let lim = limit.map_or("-".to_string(), |l| format!("{l}"));
+        let shown = if f.value != 0.0 && f.value.abs() < 1e-3 {
+            format!("{:.3e}", f.value)
+        } else {
+            format!("{:.4}", f.value)
+        };
         println!(
-            "{:<44} {:>10.4} {:<3} {:>14}  {}",
+            "{:<44} {:>10} {:<3} {:>14}  {}",
             f.key,
-            f.value,
+            shown,
             f.unit,
             lim,
             if ok { "ok" } else { "WORSE" }

@@ -43,6 +43,7 @@ pub fn median_ms(n: usize, mut f: impl FnMut()) -> f64 {
 pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
     let mut figures = Vec::new();
     figures.extend(camera(quick)?);
+    figures.extend(eval(quick)?);
     Ok(figures)
 }
 
@@ -79,5 +80,113 @@ fn camera(quick: bool) -> Result<Vec<Figure>> {
         Figure::lower("camera.build_map_ms", build, "ms"),
         Figure::lower("camera.remap_u8_640x480_ms", remap, "ms"),
         Figure::lower("camera.peak_rss_mb", peak_rss_mb(), "MB"),
+    ])
+}
+
+/// Evaluation stage: exactness on known drift, one 10,000-pose run, and a batch of runs
+/// (2 methods x sequences x 2 directions x 5 runs) parsed and evaluated in parallel.
+fn eval(quick: bool) -> Result<Vec<Figure>> {
+    use eval_metrics::{evaluate, parse_tum, GroundTruth};
+    use rayon::prelude::*;
+    use synthetic::results::{default_methods, run_text, sequence_path};
+    use synthetic::trajectory::{
+        benchmark_path, estimate, tum_text, Drift, EstimateConfig, PathConfig,
+    };
+
+    println!("stage eval: drift metrics on synthetic runs with known drift");
+    let path = benchmark_path(
+        3,
+        &PathConfig {
+            frames: 10_000,
+            ..PathConfig::default()
+        },
+    );
+    let gt = GroundTruth::parse(&path.ground_truth_sync())?;
+    let run = |drift: Drift| {
+        let cfg = EstimateConfig {
+            drift,
+            world_scale: 2.5,
+            ..EstimateConfig::default()
+        };
+        parse_tum(&tum_text(&estimate(&path, &cfg, 3)))
+    };
+    let scale = evaluate(
+        &run(Drift {
+            scale_jumps: vec![(5000, 0.8)],
+            ..Drift::default()
+        })?,
+        &gt,
+    );
+    let rot = evaluate(
+        &run(Drift {
+            rotation_jumps: vec![(5000, [0.3, 0.1, 1.0], 10.0)],
+            ..Drift::default()
+        })?,
+        &gt,
+    );
+    let e_s_err = (scale.metrics.e_s - 0.8).abs() / 0.8;
+    let e_r_err = (rot.metrics.e_r - 10.0).abs();
+    let text = tum_text(&estimate(
+        &path,
+        &EstimateConfig {
+            drift: Drift {
+                scale_walk: 1e-3,
+                ..Drift::default()
+            },
+            ..EstimateConfig::default()
+        },
+        4,
+    ));
+    let single = median_ms(if quick { 5 } else { 20 }, || {
+        if let Ok(t) = parse_tum(&text) {
+            let _ = evaluate(&t, &gt);
+        }
+    });
+    // batch
+    let sequences = if quick { 10 } else { 50 };
+    let frames = 2000;
+    let methods = default_methods();
+    let paths: Vec<_> = (1..=sequences)
+        .into_par_iter()
+        .map(|i| sequence_path(1, i, frames))
+        .collect();
+    let gts: Vec<GroundTruth> = paths
+        .iter()
+        .map(|p| GroundTruth::parse(&p.ground_truth_sync()))
+        .collect::<Result<_, _>>()?;
+    let mut texts = Vec::new();
+    for (mi, m) in methods.iter().enumerate() {
+        for (s, p) in paths.iter().enumerate() {
+            for bwd in [false, true] {
+                for r in 0..5 {
+                    texts.push((s, run_text(1, p, m, mi, s + 1, bwd, r)));
+                }
+            }
+        }
+    }
+    reset_peak_rss();
+    let t0 = Instant::now();
+    let failed: usize = texts
+        .par_iter()
+        .map(|(s, t)| match parse_tum(t) {
+            Ok(traj) => usize::from(!evaluate(&traj, &gts[*s]).is_ok()),
+            Err(_) => 1,
+        })
+        .sum();
+    let batch_ms = t0.elapsed().as_secs_f64() * 1e3;
+    println!(
+        "  {} runs evaluated, {failed} failed (by design of the synthetic methods)",
+        texts.len()
+    );
+    Ok(vec![
+        Figure::lower("eval.e_s_rel_error_scale_jump", e_s_err, ""),
+        Figure::lower("eval.e_r_error_rotation_jump_deg", e_r_err, "deg"),
+        Figure::lower("eval.single_10k_poses_ms", single, "ms"),
+        Figure::lower(
+            &format!("eval.batch_{}_runs_ms", texts.len()),
+            batch_ms,
+            "ms",
+        ),
+        Figure::lower("eval.batch_peak_rss_mb", peak_rss_mb(), "MB"),
     ])
 }

@@ -7,6 +7,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod cmd;
+mod plot;
+mod progress;
 
 /// monovo: the photometrically calibrated monocular VO benchmark, as one fast command.
 ///
@@ -23,12 +25,24 @@ struct Cli {
 enum Command {
     /// Show a camera.txt: the input model and the output pinhole camera it rectifies to.
     Camera(cmd::camera::Args),
+    /// Score one trajectory with the paper's loop-closure drift metrics.
+    Eval(cmd::eval::Args),
+    /// Score every run of a results tree in parallel into results.csv.
+    EvalBatch(cmd::eval_batch::Args),
+    /// Draw the paper's cumulative error plots, or print its per-sequence table.
+    Plot(cmd::plot::Args),
+    /// Generate synthetic data with known ground truth (fixed seed).
+    Synth(cmd::synth::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Camera(args) => cmd::camera::run(&args),
+        Command::Eval(args) => cmd::eval::run(&args),
+        Command::EvalBatch(args) => cmd::eval_batch::run(&args),
+        Command::Plot(args) => cmd::plot::run(&args),
+        Command::Synth(args) => cmd::synth::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,238 @@
+//! `monovo eval`, `monovo eval-batch`, `monovo plot`.
+use crate::common::{monovo, stderr, stdout, temp_dir};
+use std::path::Path;
+use synthetic::trajectory::{
+    benchmark_path, estimate, tum_text, Drift, EstimateConfig, PathConfig,
+};
+
+fn write(p: &Path, s: &str) {
+    std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+    std::fs::write(p, s).unwrap();
+}
+
+/// DATASET with two sequences, RESULTS with two methods x fwd/bwd x 2 runs, plus strays.
+fn fixture(dir: &Path) {
+    for seq in 1..=2u64 {
+        let path = benchmark_path(
+            seq,
+            &PathConfig {
+                frames: 400,
+                ..PathConfig::default()
+            },
+        );
+        let name = format!("sequence_{seq:02}");
+        write(
+            &dir.join("data").join(&name).join("groundtruthSync.txt"),
+            &path.ground_truth_sync(),
+        );
+        for (method, factor) in [("good", 0.97), ("bad", 0.6)] {
+            for bwd in [false, true] {
+                for run in 0..2u32 {
+                    let cfg = EstimateConfig {
+                        drift: Drift {
+                            scale_jumps: vec![(200, factor)],
+                            ..Drift::default()
+                        },
+                        backwards: bwd,
+                        backwards_epoch_times: bwd && run == 1,
+                        lost_after: (method == "bad" && run == 1 && !bwd).then_some(150),
+                        ..EstimateConfig::default()
+                    };
+                    let text = tum_text(&estimate(&path, &cfg, seq * 10 + run as u64));
+                    let file = format!("{}_{run}.txt", if bwd { "bwd" } else { "fwd" });
+                    write(&dir.join("res").join(method).join(&name).join(file), &text);
+                }
+            }
+        }
+    }
+    write(&dir.join("res/good/sequence_01/notes.txt"), "stray");
+    write(
+        &dir.join("res/good/sequence_09/fwd_0.txt"),
+        "1 0 0 0 0 0 0 1\n",
+    );
+}
+
+#[test]
+fn eval_json_has_exactly_the_documented_keys() {
+    let d = temp_dir("eval_json");
+    fixture(&d);
+    let gt = d.join("data/sequence_01/groundtruthSync.txt");
+    let run = d.join("res/good/sequence_01/fwd_0.txt");
+    let o = monovo(&[
+        "eval",
+        run.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let mut keys: Vec<_> = v.as_object().unwrap().keys().cloned().collect();
+    keys.sort();
+    assert_eq!(
+        keys,
+        [
+            "e_align",
+            "e_r",
+            "e_rmse",
+            "e_s",
+            "e_t",
+            "poses",
+            "poses_end",
+            "poses_start",
+            "reason",
+            "rmse_end",
+            "rmse_start",
+            "status"
+        ]
+    );
+    assert_eq!(v["status"], "ok");
+    assert!((v["e_s"].as_f64().unwrap() - 0.97).abs() < 1e-9);
+    assert_eq!(v["poses"], 400);
+
+    // a failed run is a result: exit 0, status failed, null metrics
+    let lost = d.join("res/bad/sequence_01/fwd_1.txt");
+    let o = monovo(&[
+        "eval",
+        lost.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success());
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["status"], "failed");
+    assert!(v["e_align"].is_null());
+    assert!(v["reason"].as_str().unwrap().contains("end segment"));
+}
+
+#[test]
+fn eval_plot_and_bad_input() {
+    let d = temp_dir("eval_plot");
+    fixture(&d);
+    let gt = d.join("data/sequence_02/groundtruthSync.txt");
+    let run = d.join("res/bad/sequence_02/bwd_1.txt");
+    let png = d.join("align.png");
+    let o = monovo(&[
+        "eval",
+        run.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("2e9 - t"));
+    assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
+    let svg = d.join("align.svg");
+    let o = monovo(&[
+        "eval",
+        run.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<polyline"));
+
+    let bad = d.join("bad.txt");
+    write(&bad, "1 2 3 4 5 6 7 8\n1 2 three 4 5 6 7 8\n");
+    let o = monovo(&["eval", bad.to_str().unwrap(), "--gt", gt.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("bad.txt") && e.contains("line 2"), "{e}");
+    let o = monovo(&[
+        "eval",
+        bad.to_str().unwrap(),
+        "--gt",
+        d.join("none.txt").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("none.txt"));
+}
+
+#[test]
+fn batch_csv_table_and_cumulative_plots() {
+    let d = temp_dir("eval_batch");
+    fixture(&d);
+    let csv = d.join("results.csv");
+    let o = monovo(&[
+        "eval-batch",
+        "--dataset",
+        d.join("data").to_str().unwrap(),
+        "--results",
+        d.join("res").to_str().unwrap(),
+        "-o",
+        csv.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["runs"], 16);
+    assert_eq!(v["failed"], 2);
+    assert_eq!(v["stray"].as_array().unwrap().len(), 2);
+    assert!(stderr(&o).contains("notes.txt") && stderr(&o).contains("sequence_09"));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().count(), 17);
+    assert!(text.starts_with("method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses\n"));
+
+    for (metric, split, file) in [
+        ("e_align", None, "a.png"),
+        ("e_s", Some("direction"), "s.svg"),
+        ("e_r", None, "r.png"),
+    ] {
+        let out = d.join(file);
+        let mut args = vec![
+            "plot",
+            "cumulative",
+            csv.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--metric",
+            metric,
+        ];
+        if let Some(s) = split {
+            args.extend(["--split", s]);
+        }
+        let o = monovo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(std::fs::metadata(&out).unwrap().len() > 2000);
+    }
+    let o = monovo(&["plot", "table", csv.to_str().unwrap()]);
+    assert!(o.status.success());
+    let t = stdout(&o);
+    assert!(t.starts_with("| sequence | bad | good |"), "{t}");
+    assert_eq!(t.lines().count(), 4);
+
+    // a malformed run stops the batch with the file and line, unless --keep-going
+    write(&d.join("res/good/sequence_02/fwd_7.txt"), "1 2 3\n");
+    let o = monovo(&[
+        "eval-batch",
+        "--dataset",
+        d.join("data").to_str().unwrap(),
+        "--results",
+        d.join("res").to_str().unwrap(),
+        "-o",
+        d.join("r2.csv").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("fwd_7.txt") && stderr(&o).contains("line 1"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!d.join("r2.csv").exists(), "no partial output");
+    let o = monovo(&[
+        "eval-batch",
+        "--keep-going",
+        "--dataset",
+        d.join("data").to_str().unwrap(),
+        "--results",
+        d.join("res").to_str().unwrap(),
+        "-o",
+        d.join("r2.csv").to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert!(stdout(&o).contains("17 runs"));
+}

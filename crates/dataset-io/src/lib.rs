@@ -1,0 +1,36 @@
+//! The files of the TUM monoVO benchmark: evaluation trees (ground truths and results),
+//! reading text, and atomic writes that never leave a half-written output.
+//!
+//! dataset-io owns the file system; the text formats themselves are parsed by the crate that
+//! owns the concept (camera.txt in camera-model, trajectories in eval-metrics).
+//!
+//! # Example
+//!
+//! ```
+//! use dataset_io::{scan_results, write_atomic};
+//!
+//! let root = std::env::temp_dir().join(format!("dataset-io-doc-{}", std::process::id()));
+//! let seq = root.join("dso/sequence_01");
+//! std::fs::create_dir_all(&seq)?;
+//! write_atomic(&seq.join("fwd_0.txt"), b"1 0 0 0 0 0 0 1\n")?;
+//! write_atomic(&seq.join("notes.md"), b"stray")?;
+//! let tree = scan_results(&root)?;
+//! assert_eq!(tree.runs.len(), 1);
+//! assert_eq!(tree.runs[0].method, "dso");
+//! assert_eq!(tree.stray.len(), 1);
+//! std::fs::remove_dir_all(&root)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![deny(missing_docs)]
+
+mod atomic;
+mod error;
+mod outdir;
+mod png;
+mod results;
+
+pub use atomic::{read_text, temp_sibling, write_atomic, write_atomic_with};
+pub use error::DatasetError;
+pub use outdir::OutputDir;
+pub use png::{encode_png_u16, encode_png_u8, write_png_u16, write_png_u8, PngSpeed};
+pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};

@@ -1,0 +1,104 @@
+//! PNG encoding of 8-bit grey, 16-bit grey and 8-bit RGB images, written atomically.
+
+use std::path::Path;
+
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder};
+
+use crate::{write_atomic_with, DatasetError};
+
+/// How hard the PNG encoder works: `Fast` for frame sequences, `Best` for plots and maps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PngSpeed {
+    /// Fast compression, adaptive filter.
+    Fast,
+    /// Default compression.
+    Default,
+}
+
+fn encoder<W: std::io::Write>(w: W, speed: PngSpeed) -> PngEncoder<W> {
+    match speed {
+        PngSpeed::Fast => {
+            PngEncoder::new_with_quality(w, CompressionType::Fast, FilterType::Adaptive)
+        }
+        PngSpeed::Default => {
+            PngEncoder::new_with_quality(w, CompressionType::Default, FilterType::Adaptive)
+        }
+    }
+}
+
+fn check_len(path: &Path, len: usize, want: usize) -> Result<(), DatasetError> {
+    if len != want {
+        return Err(DatasetError::invalid(
+            path,
+            format!("image buffer has {len} bytes, expected {want}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Encodes an image into PNG bytes. `channels` is 1 (grey) or 3 (RGB) for 8-bit data.
+pub fn encode_png_u8(
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[u8],
+    speed: PngSpeed,
+) -> Result<Vec<u8>, image::ImageError> {
+    let color = if channels == 3 {
+        ExtendedColorType::Rgb8
+    } else {
+        ExtendedColorType::L8
+    };
+    let mut out = Vec::with_capacity(data.len() / 2 + 1024);
+    encoder(&mut out, speed).write_image(data, width as u32, height as u32, color)?;
+    Ok(out)
+}
+
+/// Encodes a 16-bit grey image into PNG bytes.
+pub fn encode_png_u16(
+    width: usize,
+    height: usize,
+    data: &[u16],
+    speed: PngSpeed,
+) -> Result<Vec<u8>, image::ImageError> {
+    // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    let mut out = Vec::with_capacity(bytes.len() / 2 + 1024);
+    encoder(&mut out, speed).write_image(
+        &bytes,
+        width as u32,
+        height as u32,
+        ExtendedColorType::L16,
+    )?;
+    Ok(out)
+}
+
+/// Writes an 8-bit grey (`channels == 1`) or RGB (`channels == 3`) PNG atomically.
+pub fn write_png_u8(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[u8],
+    speed: PngSpeed,
+) -> Result<(), DatasetError> {
+    check_len(path, data.len(), width * height * channels)?;
+    let bytes = encode_png_u8(width, height, channels, data, speed)
+        .map_err(|e| DatasetError::invalid(path, format!("PNG encoding failed: {e}")))?;
+    write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
+}
+
+/// Writes a 16-bit grey PNG atomically.
+pub fn write_png_u16(
+    path: &Path,
+    width: usize,
+    height: usize,
+    data: &[u16],
+    speed: PngSpeed,
+) -> Result<(), DatasetError> {
+    check_len(path, data.len(), width * height)?;
+    let bytes = encode_png_u16(width, height, data, speed)
+        .map_err(|e| DatasetError::invalid(path, format!("PNG encoding failed: {e}")))?;
+    write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
+}

@@ -1,0 +1,90 @@
+//! The loop-closure drift metrics of the TUM monoVO benchmark (Engel, Usenko, Cremers,
+//! section 3), exact and fast, for one run or thousands.
+//!
+//! * [`parse_tum`], [`parse_kitti`], [`parse_euroc`] read estimated trajectories;
+//!   [`GroundTruth::parse`] reads `groundtruthSync.txt`.
+//! * [`evaluate`] sorts, associates (1 ms), aligns the start and end segments by Sim(3)
+//!   ([`align_sim3`], Umeyama) and returns `e_align`, `e_s`, `e_r`, `e_t`, `e_rmse` and the
+//!   segment RMSEs. A run that cannot be evaluated is a *failed* result, not an error.
+//! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`markdown_table`], and the
+//!   results.csv format ([`write_csv`], [`parse_csv`]) for the paper's tables and plots.
+//!
+//! # Example
+//!
+//! ```
+//! use eval_metrics::{evaluate, parse_tum, GroundTruth};
+//!
+//! // A ground truth of 8 rows: a loop of 4 poses at the start and 4 at the end.
+//! let mut gt = String::new();
+//! let mut est = String::new();
+//! let pts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.5]];
+//! for (i, p) in pts.iter().chain(pts.iter()).enumerate() {
+//!     gt += &format!("{i} {} {} {} 0 0 0 1\n", p[0], p[1], p[2]);
+//!     // the estimate is the ground truth at twice the scale
+//!     est += &format!("{i} {} {} {} 0 0 0 1\n", 2.0 * p[0], 2.0 * p[1], 2.0 * p[2]);
+//! }
+//! let run = evaluate(&parse_tum(&est)?, &GroundTruth::parse(&gt)?);
+//! assert!(run.is_ok());
+//! assert!(run.metrics.e_align < 1e-12);
+//! assert!((run.metrics.e_s - 1.0).abs() < 1e-12);
+//! # Ok::<(), eval_metrics::EvalError>(())
+//! ```
+#![deny(missing_docs)]
+
+mod batch;
+mod evaluate;
+pub mod linalg;
+mod sim3;
+mod trajectory;
+
+pub use batch::{
+    cumulative, evaluate_batch, markdown_table, parse_csv, summarize, write_csv, Cumulative,
+    Direction, DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+};
+pub use evaluate::{
+    evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
+};
+pub use sim3::{align_sim3, AlignFailure, Alignment, Sim3};
+pub use trajectory::{
+    detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,
+    TrajectoryFormat,
+};
+
+/// Errors for unusable input (a malformed line, an empty or disordered ground truth). A run
+/// that is merely bad (empty, NaN, lost tracking) is not an error: see [`FailReason`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EvalError {
+    /// A line that does not have the expected form.
+    #[error("line {line}: expected {expected}, found `{found}`")]
+    Parse {
+        /// 1-based line number.
+        line: usize,
+        /// What the line should contain.
+        expected: &'static str,
+        /// An excerpt of the line.
+        found: String,
+    },
+    /// Ground-truth timestamps that do not strictly increase.
+    #[error(
+        "line {line}: ground-truth timestamps must strictly increase, but {t} follows {previous}"
+    )]
+    GroundTruthOrder {
+        /// 1-based line number.
+        line: usize,
+        /// The offending timestamp.
+        t: f64,
+        /// The timestamp before it.
+        previous: f64,
+    },
+    /// A ground truth without rows.
+    #[error("the ground truth has no rows")]
+    EmptyGroundTruth,
+    /// KITTI poses and timestamps of different counts.
+    #[error("{poses} KITTI poses but {times} timestamps in the times file")]
+    KittiCount {
+        /// Number of pose lines.
+        poses: usize,
+        /// Number of timestamp lines.
+        times: usize,
+    },
+}

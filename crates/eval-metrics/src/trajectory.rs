@@ -1,0 +1,326 @@
+//! Trajectory text formats: TUM (`t x y z qx qy qz qw`), KITTI (12 numbers a line plus a
+//! times file) and EuRoC csv, and the benchmark's `groundtruthSync.txt`.
+
+use crate::linalg::{self, Vec3};
+use crate::EvalError;
+
+/// One camera pose: time, position and orientation of the camera in the world
+/// (camera-to-world, `world_from_camera`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// Timestamp in seconds.
+    pub t: f64,
+    /// Camera centre in world coordinates.
+    pub position: Vec3,
+    /// Orientation as a unit quaternion `(qx, qy, qz, qw)`.
+    pub orientation: [f64; 4],
+}
+
+impl Pose {
+    /// Whether every number of the pose is finite.
+    pub fn is_finite(&self) -> bool {
+        self.t.is_finite()
+            && self.position.iter().all(|v| v.is_finite())
+            && self.orientation.iter().all(|v| v.is_finite())
+    }
+}
+
+/// A sequence of poses in file order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory {
+    /// The poses, in the order of the file.
+    pub poses: Vec<Pose>,
+}
+
+/// Supported trajectory file formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrajectoryFormat {
+    /// `t x y z qx qy qz qw` per line (spaces or commas), `#` comments.
+    Tum,
+    /// `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz` per line, timestamps from a times file.
+    Kitti,
+    /// EuRoC csv: `timestamp_ns, px, py, pz, qw, qx, qy, qz[, ...]`, `#` header.
+    Euroc,
+}
+
+const MAX_FOUND: usize = 120;
+
+fn excerpt(line: &str) -> String {
+    let t = line.trim();
+    if t.len() <= MAX_FOUND {
+        t.to_string()
+    } else {
+        let mut end = MAX_FOUND;
+        while !t.is_char_boundary(end) {
+            end -= 1;
+        }
+        format!("{}...", &t[..end])
+    }
+}
+
+/// Iterates the data lines of a text: 1-based line number and content, skipping blank lines
+/// and `#` comments.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines().enumerate().filter_map(|(i, l)| {
+        let t = l.trim();
+        if t.is_empty() || t.starts_with('#') || t.starts_with("//") || t.starts_with('%') {
+            None
+        } else {
+            Some((i + 1, t))
+        }
+    })
+}
+
+/// Parses exactly `N` numbers (or at least `N` when `allow_more`) separated by whitespace or
+/// commas. NaN and infinities parse (the evaluation decides what they mean).
+fn parse_fields<const N: usize>(
+    line_no: usize,
+    line: &str,
+    expected: &'static str,
+    allow_more: bool,
+) -> Result<[f64; N], EvalError> {
+    let mut out = [0.0; N];
+    let mut count = 0;
+    for tok in line
+        .split(|c: char| c.is_ascii_whitespace() || c == ',')
+        .filter(|s| !s.is_empty())
+    {
+        if count >= N {
+            if allow_more {
+                break;
+            }
+            count += 1;
+            break;
+        }
+        out[count] = tok.parse::<f64>().map_err(|_| EvalError::Parse {
+            line: line_no,
+            expected,
+            found: excerpt(line),
+        })?;
+        count += 1;
+    }
+    if count != N {
+        return Err(EvalError::Parse {
+            line: line_no,
+            expected,
+            found: excerpt(line),
+        });
+    }
+    Ok(out)
+}
+
+const TUM_EXPECTED: &str = "8 numbers `t x y z qx qy qz qw`";
+
+/// Parses a TUM-format trajectory.
+pub fn parse_tum(text: &str) -> Result<Trajectory, EvalError> {
+    let mut poses = Vec::with_capacity(text.len() / 80);
+    for (no, line) in data_lines(text) {
+        let v = parse_fields::<8>(no, line, TUM_EXPECTED, false)?;
+        poses.push(Pose {
+            t: v[0],
+            position: [v[1], v[2], v[3]],
+            orientation: [v[4], v[5], v[6], v[7]],
+        });
+    }
+    Ok(Trajectory { poses })
+}
+
+/// Parses a KITTI pose file (3x4 `[R | t]` row-major, camera-to-world) with its times file
+/// (one timestamp in seconds per line).
+pub fn parse_kitti(poses_text: &str, times_text: &str) -> Result<Trajectory, EvalError> {
+    let mut times = Vec::new();
+    for (no, line) in data_lines(times_text) {
+        let v = parse_fields::<1>(no, line, "one timestamp in seconds", false)?;
+        times.push(v[0]);
+    }
+    let mut poses = Vec::with_capacity(times.len());
+    for (no, line) in data_lines(poses_text) {
+        let v = parse_fields::<12>(
+            no,
+            line,
+            "12 numbers `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz`",
+            false,
+        )?;
+        let r = [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]];
+        let orientation = if r.iter().flatten().all(|x| x.is_finite()) {
+            linalg::matrix_to_quat(&r)
+        } else {
+            [f64::NAN; 4]
+        };
+        poses.push(Pose {
+            t: 0.0,
+            position: [v[3], v[7], v[11]],
+            orientation,
+        });
+    }
+    if poses.len() != times.len() {
+        return Err(EvalError::KittiCount {
+            poses: poses.len(),
+            times: times.len(),
+        });
+    }
+    for (p, t) in poses.iter_mut().zip(times) {
+        p.t = t;
+    }
+    Ok(Trajectory { poses })
+}
+
+/// Parses an EuRoC csv trajectory (`timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z`, any
+/// further columns ignored).
+pub fn parse_euroc(text: &str) -> Result<Trajectory, EvalError> {
+    let mut poses = Vec::new();
+    for (no, line) in data_lines(text) {
+        let v = parse_fields::<8>(
+            no,
+            line,
+            "at least 8 comma-separated numbers `timestamp_ns, px, py, pz, qw, qx, qy, qz`",
+            true,
+        )?;
+        poses.push(Pose {
+            t: v[0] * 1e-9,
+            position: [v[1], v[2], v[3]],
+            orientation: [v[5], v[6], v[7], v[4]],
+        });
+    }
+    Ok(Trajectory { poses })
+}
+
+/// Guesses the format of a trajectory text from its first data line: commas with a
+/// nanosecond timestamp mean EuRoC, 12 numbers KITTI, otherwise TUM.
+pub fn detect_format(text: &str) -> TrajectoryFormat {
+    let Some((_, line)) = data_lines(text).next() else {
+        return TrajectoryFormat::Tum;
+    };
+    let fields: Vec<&str> = line
+        .split(|c: char| c.is_ascii_whitespace() || c == ',')
+        .filter(|s| !s.is_empty())
+        .collect();
+    let first_is_ns = fields
+        .first()
+        .and_then(|f| f.parse::<f64>().ok())
+        .is_some_and(|t| t > 1e11);
+    if line.contains(',') && first_is_ns {
+        TrajectoryFormat::Euroc
+    } else if fields.len() == 12 {
+        TrajectoryFormat::Kitti
+    } else {
+        TrajectoryFormat::Tum
+    }
+}
+
+/// The benchmark's loop-closure ground truth (`groundtruthSync.txt`): one row per frame,
+/// `NaN` positions outside the start and end segments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroundTruth {
+    times: Vec<f64>,
+    positions: Vec<Vec3>,
+}
+
+impl GroundTruth {
+    /// Parses `groundtruthSync.txt` (TUM format; NaN rows allowed; timestamps strictly
+    /// increasing).
+    pub fn parse(text: &str) -> Result<GroundTruth, EvalError> {
+        let mut times = Vec::with_capacity(text.len() / 60);
+        let mut positions = Vec::with_capacity(text.len() / 60);
+        let mut prev: Option<(usize, f64)> = None;
+        for (no, line) in data_lines(text) {
+            let v = parse_fields::<8>(no, line, TUM_EXPECTED, false)?;
+            let t = v[0];
+            if !t.is_finite() {
+                return Err(EvalError::Parse {
+                    line: no,
+                    expected: "a finite timestamp",
+                    found: excerpt(line),
+                });
+            }
+            if let Some((_, p)) = prev {
+                if t <= p {
+                    return Err(EvalError::GroundTruthOrder {
+                        line: no,
+                        t,
+                        previous: p,
+                    });
+                }
+            }
+            prev = Some((no, t));
+            times.push(t);
+            positions.push([v[1], v[2], v[3]]);
+        }
+        if times.is_empty() {
+            return Err(EvalError::EmptyGroundTruth);
+        }
+        Ok(GroundTruth { times, positions })
+    }
+
+    /// Builds a ground truth from times and positions (NaN positions allowed; times must
+    /// strictly increase).
+    pub fn from_rows(times: Vec<f64>, positions: Vec<Vec3>) -> Result<GroundTruth, EvalError> {
+        if times.is_empty() || times.len() != positions.len() {
+            return Err(EvalError::EmptyGroundTruth);
+        }
+        for i in 1..times.len() {
+            if times[i].is_nan() || times[i] <= times[i - 1] {
+                return Err(EvalError::GroundTruthOrder {
+                    line: i + 1,
+                    t: times[i],
+                    previous: times[i - 1],
+                });
+            }
+        }
+        Ok(GroundTruth { times, positions })
+    }
+
+    /// Row timestamps.
+    pub fn times(&self) -> &[f64] {
+        &self.times
+    }
+
+    /// Row positions (NaN outside the segments).
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+
+    /// Always false: a ground truth has at least one row.
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+
+    /// Number of rows with a finite position in the start window and in the end window.
+    pub fn segment_sizes(&self) -> (usize, usize) {
+        let (s, e) = self.window_bounds();
+        let finite = |i: &usize| self.positions[*i].iter().all(|v| v.is_finite());
+        (
+            (0..=s).filter(finite).count(),
+            (e..self.len()).filter(finite).count(),
+        )
+    }
+
+    /// Last row index of the start window and first row index of the end window (0-based):
+    /// with `n` rows the windows are rows `1..=floor(n/2)` and `ceil(n/2)..=n` (1-based).
+    pub fn window_bounds(&self) -> (usize, usize) {
+        let n = self.len();
+        let start_last = (n / 2).max(1) - 1;
+        let end_first = n.div_ceil(2).max(1) - 1;
+        (start_last, end_first)
+    }
+
+    /// Index of the row nearest in time to `t`, if within `tolerance` seconds.
+    pub fn associate(&self, t: f64, tolerance: f64) -> Option<usize> {
+        let i = self.times.partition_point(|&x| x < t);
+        let mut best: Option<(usize, f64)> = None;
+        for j in [i.wrapping_sub(1), i] {
+            if let Some(&x) = self.times.get(j) {
+                let d = (x - t).abs();
+                if best.is_none_or(|(_, bd)| d < bd) {
+                    best = Some((j, d));
+                }
+            }
+        }
+        best.filter(|&(_, d)| d <= tolerance).map(|(j, _)| j)
+    }
+}

@@ -1,0 +1,8 @@
+//! Integration tests of eval-metrics: one binary, one module per topic.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod align;
+mod batch;
+mod common;
+mod metrics;
+mod parse;

@@ -1,0 +1,102 @@
+//! Trajectory and ground-truth formats.
+use eval_metrics::{
+    detect_format, parse_euroc, parse_kitti, parse_tum, EvalError, GroundTruth, TrajectoryFormat,
+};
+
+#[test]
+fn tum_with_comments_blank_lines_and_commas() {
+    let t = parse_tum("# timestamp x y z qx qy qz qw\n\n1.0 1 2 3 0 0 0 1\n2.0,4,5,6,0,0,0,1\n")
+        .unwrap();
+    assert_eq!(t.poses.len(), 2);
+    assert_eq!(t.poses[1].position, [4.0, 5.0, 6.0]);
+    assert_eq!(t.poses[0].orientation, [0.0, 0.0, 0.0, 1.0]);
+    // NaN parses: the evaluation turns it into a failed run
+    assert!(parse_tum("1 nan 0 0 0 0 0 1\n").unwrap().poses[0].position[0].is_nan());
+}
+
+#[test]
+fn malformed_lines_are_named() {
+    let e = parse_tum("1 2 3 4 5 6 7 8\n1 2 3\n").unwrap_err();
+    assert!(matches!(e, EvalError::Parse { line: 2, .. }), "{e}");
+    let e = parse_tum("1 2 3 4 5 6 7 8\n\n# c\n1 2 3 x 5 6 7 8\n").unwrap_err();
+    assert!(
+        e.to_string().starts_with("line 4: expected 8 numbers"),
+        "{e}"
+    );
+    let e = parse_tum("1 2 3 4 5 6 7 8 9\n").unwrap_err();
+    assert!(matches!(e, EvalError::Parse { line: 1, .. }));
+    let e = GroundTruth::parse("1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n").unwrap_err();
+    assert!(
+        matches!(e, EvalError::GroundTruthOrder { line: 2, .. }),
+        "{e}"
+    );
+    assert_eq!(
+        GroundTruth::parse("# nothing\n").unwrap_err(),
+        EvalError::EmptyGroundTruth
+    );
+}
+
+#[test]
+fn kitti_and_euroc_read_the_same_trajectory_as_tum() {
+    let tum =
+        parse_tum("10.5 1 2 3 0 0 0.7071067811865476 0.7071067811865476\n11.5 4 5 6 0 0 0 1\n")
+            .unwrap();
+    let kitti = parse_kitti(
+        "0 -1 0 1 1 0 0 2 0 0 1 3\n1 0 0 4 0 1 0 5 0 0 1 6\n",
+        "10.5\n11.5\n",
+    )
+    .unwrap();
+    let euroc = parse_euroc(
+        "#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z\n10500000000,1,2,3,0.7071067811865476,0,0,0.7071067811865476,9,9\n11500000000,4,5,6,1,0,0,0\n",
+    )
+    .unwrap();
+    for other in [&kitti, &euroc] {
+        for (a, b) in tum.poses.iter().zip(&other.poses) {
+            assert!((a.t - b.t).abs() < 1e-9);
+            assert_eq!(a.position, b.position);
+            for k in 0..4 {
+                assert!(
+                    (a.orientation[k] - b.orientation[k]).abs() < 1e-12,
+                    "{a:?} {b:?}"
+                );
+            }
+        }
+    }
+    let e = parse_kitti("0 -1 0 1 1 0 0 2 0 0 1 3\n", "1\n2\n").unwrap_err();
+    assert_eq!(e, EvalError::KittiCount { poses: 1, times: 2 });
+    assert_eq!(detect_format("1 2 3 4 5 6 7 8\n"), TrajectoryFormat::Tum);
+    assert_eq!(
+        detect_format("1 0 0 4 0 1 0 5 0 0 1 6\n"),
+        TrajectoryFormat::Kitti
+    );
+    assert_eq!(
+        detect_format("#h\n1403636579763555584,1,2,3,1,0,0,0\n"),
+        TrajectoryFormat::Euroc
+    );
+}
+
+#[test]
+fn ground_truth_windows_follow_floor_and_ceil_of_half() {
+    let rows = |n: usize| {
+        (0..n)
+            .map(|i| format!("{i} 0 0 0 0 0 0 1\n"))
+            .collect::<String>()
+    };
+    // n = 5: start rows 1..=2, end rows 3..=5 (1-based)
+    assert_eq!(
+        GroundTruth::parse(&rows(5)).unwrap().window_bounds(),
+        (1, 2)
+    );
+    // n = 4: start rows 1..=2, end rows 2..=4
+    assert_eq!(
+        GroundTruth::parse(&rows(4)).unwrap().window_bounds(),
+        (1, 1)
+    );
+    let gt = GroundTruth::parse(
+        "0 0 0 0 0 0 0 1\n1 NaN NaN NaN NaN NaN NaN NaN\n2 1 1 1 0 0 0 1\n3 2 2 2 0 0 0 1\n",
+    )
+    .unwrap();
+    assert_eq!(gt.segment_sizes(), (1, 2));
+    assert_eq!(gt.associate(2.0009, 0.001), Some(2));
+    assert_eq!(gt.associate(2.5, 0.001), None);
+}
