@@ -25,6 +25,10 @@ struct Cli {
 enum Command {
     /// Show a camera.txt: the input model and the output pinhole camera it rectifies to.
     Camera(cmd::camera::Args),
+    /// What a sequence folder holds: frames, timing, exposures, camera, calibration, ground truth.
+    Info(cmd::info::Args),
+    /// Rectify a sequence to a pinhole camera (and undo response and vignetting) as a new sequence.
+    Rectify(cmd::rectify::Args),
     /// Score one trajectory with the paper's loop-closure drift metrics.
     Eval(cmd::eval::Args),
     /// Score every run of a results tree in parallel into results.csv.
@@ -39,6 +43,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Camera(args) => cmd::camera::run(&args),
+        Command::Info(args) => cmd::info::run(&args),
+        Command::Rectify(args) => cmd::rectify::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),

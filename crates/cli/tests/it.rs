@@ -4,3 +4,4 @@
 mod camera;
 mod common;
 mod eval;
+mod rectify;

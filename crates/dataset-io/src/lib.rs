@@ -1,5 +1,8 @@
-//! The files of the TUM monoVO benchmark: evaluation trees (ground truths and results),
-//! reading text, and atomic writes that never leave a half-written output.
+//! The files of the TUM monoVO benchmark: sequence folders ([`Sequence`]: `images.zip` or
+//! `images/`, `times.txt`, `camera.txt`, calibration files) with random access, backwards
+//! playback and parallel ordered decoding; writing sequences ([`SequenceWriter`]); evaluation
+//! trees (ground truths and results); PNG; and atomic writes and output folders that never
+//! leave a half-written output.
 //!
 //! dataset-io owns the file system; the text formats themselves are parsed by the crate that
 //! owns the concept (camera.txt in camera-model, trajectories in eval-metrics).
@@ -28,9 +31,17 @@ mod error;
 mod outdir;
 mod png;
 mod results;
+mod sequence;
+mod times;
+mod writer;
 
 pub use atomic::{read_text, temp_sibling, write_atomic, write_atomic_with};
 pub use error::DatasetError;
 pub use outdir::OutputDir;
-pub use png::{encode_png_u16, encode_png_u8, write_png_u16, write_png_u8, PngSpeed};
+pub use png::{
+    encode_jpeg_gray, encode_png_u16, encode_png_u8, write_png_u16, write_png_u8, PngSpeed,
+};
 pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};
+pub use sequence::{decode_gray16, decode_gray8, read_gray16, read_gray8, Frame, Sequence};
+pub use times::{parse_times, times_text, TimeRow, Times};
+pub use writer::{write_images_zip, SequenceWriter};

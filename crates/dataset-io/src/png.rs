@@ -102,3 +102,16 @@ pub fn write_png_u16(
         .map_err(|e| DatasetError::invalid(path, format!("PNG encoding failed: {e}")))?;
     write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
 }
+
+/// Encodes an 8-bit grey image as JPEG of the given quality (1-100).
+pub fn encode_jpeg_gray(
+    width: usize,
+    height: usize,
+    data: &[u8],
+    quality: u8,
+) -> Result<Vec<u8>, image::ImageError> {
+    let mut out = Vec::with_capacity(data.len() / 4);
+    let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100));
+    enc.write_image(data, width as u32, height as u32, ExtendedColorType::L8)?;
+    Ok(out)
+}

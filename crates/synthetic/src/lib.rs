@@ -1,6 +1,8 @@
 //! Synthetic data with known ground truth for every monovo stage, always from a fixed seed:
 //! benchmark-like camera paths and drifted VO estimates ([`trajectory`]), whole synthetic
-//! benchmark results of several methods ([`results`]), and a seedable
+//! benchmark results of several methods ([`results`]), the ground-truth camera, response,
+//! vignette and sensor ([`camera`]), rendered sequences and exposure sweeps ([`scene`]), and a
+//! seedable
 //! random number generator ([`Rng`]) that gives the same data on every platform.
 //!
 //! # Example
@@ -20,8 +22,10 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod camera;
 pub mod results;
 mod rng;
+pub mod scene;
 pub mod trajectory;
 
 pub use rng::Rng;

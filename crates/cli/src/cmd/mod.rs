@@ -3,5 +3,7 @@
 pub mod camera;
 pub mod eval;
 pub mod eval_batch;
+pub mod info;
 pub mod plot;
+pub mod rectify;
 pub mod synth;

@@ -30,6 +30,65 @@ Example:
 Method `direct` drifts little and rarely fails; method `feature` drifts more, has scale jumps,
 loses tracking more often, writes keyframes only and uses the 2e9 - t timestamps backwards.")]
     Results(ResultsArgs),
+    /// A benchmark-like sequence: zipped JPEG frames of a textured room seen through the
+    /// dataset's FOV camera with vignette, non-gamma response, auto exposure and noise, plus
+    /// times.txt, camera.txt, pcalib.txt, vignette.png and groundtruthSync.txt (the truth).
+    Sequence(SequenceArgs),
+    /// A response-calibration sweep: a static scene at exposures in steps of 1.05 (images.zip,
+    /// times.txt with exposures, camera.txt), and the true pcalib.txt as truth_pcalib.txt.
+    Sweep(SweepArgs),
+}
+
+/// Arguments of `monovo synth sequence`.
+#[derive(clap::Args, Debug)]
+pub struct SequenceArgs {
+    /// Output sequence folder (must not exist unless --force).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Image size.
+    #[arg(long, default_value = "640x512", value_name = "WxH")]
+    pub size: camera_model::ImageSize,
+    /// Number of frames.
+    #[arg(long, default_value_t = 300)]
+    pub frames: usize,
+    /// JPEG quality.
+    #[arg(long, default_value_t = 90)]
+    pub quality: u8,
+    /// Replace an existing output folder.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Arguments of `monovo synth sweep`.
+#[derive(clap::Args, Debug)]
+pub struct SweepArgs {
+    /// Output sequence folder (must not exist unless --force).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Image size.
+    #[arg(long, default_value = "640x512", value_name = "WxH")]
+    pub size: camera_model::ImageSize,
+    /// Number of exposures (frames), each 1.05 times the previous.
+    #[arg(long, default_value_t = 120)]
+    pub frames: usize,
+    /// Shortest exposure in ms.
+    #[arg(long, default_value_t = 0.05)]
+    pub min_exposure: f64,
+    /// Exposure step factor.
+    #[arg(long, default_value_t = 1.05)]
+    pub step: f64,
+    /// Store frames as PNG instead of JPEG (no compression artefacts).
+    #[arg(long)]
+    pub png: bool,
+    /// Replace an existing output folder.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `monovo synth results`.
@@ -103,9 +162,142 @@ pub fn write_results(out: &OutputDir, a: &ResultsArgs) -> Result<usize> {
     Ok(jobs.len())
 }
 
+/// Encodes frames in parallel chunks and writes them as images.zip.
+fn write_frames(
+    zip_path: &std::path::Path,
+    frames: usize,
+    ext: &str,
+    render: impl Fn(usize) -> Result<Vec<u8>> + Sync,
+) -> Result<()> {
+    let pb = progress::bar(frames as u64, "rendering");
+    let encoded: Vec<Result<(String, Vec<u8>)>> = (0..frames)
+        .into_par_iter()
+        .map(|i| {
+            let bytes = render(i)?;
+            pb.inc(1);
+            Ok((format!("{i:05}.{ext}"), bytes))
+        })
+        .collect();
+    pb.finish_and_clear();
+    let entries: Vec<(String, Vec<u8>)> = encoded.into_iter().collect::<Result<_>>()?;
+    dataset_io::write_images_zip(zip_path, entries)?;
+    Ok(())
+}
+
+/// Writes a synthetic benchmark sequence into the folder `out`.
+pub fn write_sequence(
+    out: &OutputDir,
+    a: &SequenceArgs,
+) -> Result<synthetic::scene::SyntheticSequence> {
+    use synthetic::scene::{SequenceConfig, SyntheticSequence};
+    let cfg = SequenceConfig {
+        width: a.size.width,
+        height: a.size.height,
+        frames: a.frames.max(8),
+        ..SequenceConfig::default()
+    };
+    let seq = SyntheticSequence::new(a.seed, cfg);
+    let (w, h) = (cfg.width, cfg.height);
+    write_frames(&out.file("images.zip")?, cfg.frames, "jpg", |i| {
+        Ok(dataset_io::encode_jpeg_gray(
+            w,
+            h,
+            &seq.render(i),
+            a.quality,
+        )?)
+    })?;
+    let times: String = seq
+        .times()
+        .iter()
+        .map(|(id, t, e)| format!("{id} {t:.6} {e}\n"))
+        .collect();
+    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
+    let out_size = ((w / 2).max(2), (h * 15 / 32).max(2));
+    dataset_io::write_atomic(
+        &out.file("camera.txt")?,
+        seq.camera.camera_txt(out_size).as_bytes(),
+    )?;
+    let pcalib = photometric::InverseResponse::new(seq.response)?;
+    dataset_io::write_atomic(&out.file("pcalib.txt")?, pcalib.to_text().as_bytes())?;
+    let vig =
+        photometric::Vignette::from_values(camera_model::Image::new(w, h, seq.vignette.clone())?)?;
+    let v16 = vig.to_u16();
+    dataset_io::write_png_u16(
+        &out.file("vignette.png")?,
+        w,
+        h,
+        v16.data(),
+        dataset_io::PngSpeed::Default,
+    )?;
+    dataset_io::write_atomic(
+        &out.file("groundtruthSync.txt")?,
+        seq.path.ground_truth_sync().as_bytes(),
+    )?;
+    Ok(seq)
+}
+
+/// Writes a synthetic response-calibration sweep into the folder `out`.
+pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::Sweep> {
+    use synthetic::scene::Sweep;
+    let (w, h) = (a.size.width, a.size.height);
+    let sweep = Sweep::new(a.seed, w, h, a.frames.max(2), a.min_exposure, a.step);
+    let ext = if a.png { "png" } else { "jpg" };
+    write_frames(
+        &out.file("images.zip")?,
+        sweep.exposures_ms.len(),
+        ext,
+        |i| {
+            let f = sweep.render(i);
+            Ok(if a.png {
+                dataset_io::encode_png_u8(w, h, 1, &f, dataset_io::PngSpeed::Fast)?
+            } else {
+                dataset_io::encode_jpeg_gray(w, h, &f, 95)?
+            })
+        },
+    )?;
+    let times: String = sweep
+        .exposures_ms
+        .iter()
+        .enumerate()
+        .map(|(i, e)| format!("{i:05} {:.6} {e}\n", 1_400_000_000.0 + i as f64 * 0.05))
+        .collect();
+    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
+    let cam = synthetic::camera::FovCamera::dataset(w, h);
+    dataset_io::write_atomic(&out.file("camera.txt")?, cam.camera_txt((w, h)).as_bytes())?;
+    let truth = photometric::InverseResponse::new(sweep.response)?;
+    dataset_io::write_atomic(&out.file("truth_pcalib.txt")?, truth.to_text().as_bytes())?;
+    Ok(sweep)
+}
+
 /// Runs `monovo synth`.
 pub fn run(args: &Args) -> Result<()> {
     match &args.what {
+        What::Sequence(a) => {
+            let out = OutputDir::create(&a.output, a.force)?;
+            let seq = write_sequence(&out, a)?;
+            let dir = out.commit()?;
+            println!(
+                "wrote a {}x{} sequence of {} frames to {}",
+                seq.config.width,
+                seq.config.height,
+                seq.config.frames,
+                dir.display()
+            );
+        }
+        What::Sweep(a) => {
+            let out = OutputDir::create(&a.output, a.force)?;
+            let sw = write_sweep(&out, a)?;
+            let dir = out.commit()?;
+            println!(
+                "wrote a {}x{} sweep of {} exposures ({:.3} to {:.3} ms) to {}",
+                sw.width,
+                sw.height,
+                sw.exposures_ms.len(),
+                sw.exposures_ms[0],
+                sw.exposures_ms[sw.exposures_ms.len() - 1],
+                dir.display()
+            );
+        }
         What::Results(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
             let n = write_results(&out, a)?;

@@ -1,0 +1,255 @@
+//! `monovo info` and `monovo rectify` on a generated 1280x1024 zipped JPEG sequence.
+use crate::common::{monovo, stderr, stdout, temp_dir};
+use camera_model::{CameraFile, RectifyMap};
+use dataset_io::Sequence;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// A synthetic 1280x1024 sequence of 8 frames, generated once per test run.
+fn fixture() -> &'static PathBuf {
+    static SEQ: OnceLock<PathBuf> = OnceLock::new();
+    SEQ.get_or_init(|| {
+        let d = temp_dir("rectify_fixture");
+        let seq = d.join("seq");
+        let o = monovo(&[
+            "synth",
+            "sequence",
+            "-o",
+            seq.to_str().unwrap(),
+            "--size",
+            "1280x1024",
+            "--frames",
+            "8",
+            "--seed",
+            "4",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        seq
+    })
+}
+
+/// A copy of the fixture that a test may break.
+fn copy_of(name: &str) -> PathBuf {
+    let d = temp_dir(name);
+    let dst = d.join("seq");
+    std::fs::create_dir_all(&dst).unwrap();
+    for e in std::fs::read_dir(fixture()).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dst.join(e.file_name())).unwrap();
+    }
+    dst
+}
+
+fn leftovers(parent: &Path) -> Vec<String> {
+    std::fs::read_dir(parent)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n != "seq")
+        .collect()
+}
+
+#[test]
+fn rectified_frames_equal_rectifying_each_decoded_frame_by_hand() {
+    let d = temp_dir("rectify_exact");
+    let out = d.join("out");
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["frames"], 8);
+    let raw = Sequence::open(fixture()).unwrap();
+    let cam = raw.camera().unwrap();
+    let map =
+        RectifyMap::for_mode(&cam.input, cam.input_size, &cam.output, cam.output_size).unwrap();
+    let rect = Sequence::open(&out).unwrap();
+    assert_eq!(rect.len(), 8);
+    for k in 0..8 {
+        let want = map.remap_u8(&raw.decode(k).unwrap()).unwrap();
+        assert_eq!(rect.decode(k).unwrap(), want, "frame {k}");
+        assert_eq!(
+            rect.times().rows[k].timestamp,
+            raw.times().rows[k].timestamp
+        );
+    }
+    // the written camera.txt is the pinhole that was used
+    let back =
+        CameraFile::parse(&std::fs::read_to_string(out.join("camera.txt")).unwrap()).unwrap();
+    let (a, b) = (back.input.intrinsics(), map.camera());
+    assert!((a.fx - b.fx).abs() < 1e-9 && (a.cy - b.cy).abs() < 1e-9);
+    assert!(out.join("pcalib.txt").exists() && out.join("vignette.png").exists());
+    assert!(out.join("groundtruthSync.txt").exists());
+    let o = monovo(&["info", out.to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(640), Some(480))
+    );
+}
+
+#[test]
+fn reverse_range_zip_depth_and_photometric() {
+    let d = temp_dir("rectify_variants");
+    let out = d.join("bwd");
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--reverse",
+        "--range",
+        "2..6",
+        "--zip",
+        "--size",
+        "320x240",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let raw = Sequence::open(fixture()).unwrap();
+    let rect = Sequence::open(&out).unwrap();
+    assert!(rect.is_zipped());
+    assert_eq!(rect.len(), 4);
+    assert_eq!(rect.image_size(), camera_model::ImageSize::new(320, 240));
+    let t0 = raw.times().rows[5].timestamp;
+    assert!((rect.times().rows[0].timestamp - (2e9 - t0)).abs() < 1e-5);
+    assert!(!out.join("groundtruthSync.txt").exists());
+
+    let out = d.join("lin");
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--photometric",
+        "--depth",
+        "16",
+        "--output-camera",
+        "0.4 0.5 0.5 0.5 0",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("U(I) / V"));
+    assert!(!out.join("pcalib.txt").exists());
+    let (img, sixteen) = dataset_io::read_gray16(&out.join("images/00003.png")).unwrap();
+    assert!(sixteen && img.width() == 640);
+
+    let out = d.join("irr");
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--irradiance",
+        "--mask-saturated",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read_to_string(out.join("times.txt"))
+        .unwrap()
+        .lines()
+        .all(|l| l.ends_with(" 1")));
+    // existing OUT is refused without --force
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("--force"));
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--force",
+        "--range",
+        "0..2",
+    ]);
+    assert!(o.status.success());
+}
+
+fn expect_clean_failure(seq: &Path, extra: &[&str], needles: &[&str]) {
+    let out = seq.parent().unwrap().join("out");
+    let mut args = vec![
+        "rectify",
+        seq.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = monovo(&args);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert_eq!(e.trim().lines().count(), 1, "one-line error: {e}");
+    for n in needles {
+        assert!(e.contains(n), "`{n}` not in: {e}");
+    }
+    assert!(!out.exists(), "OUT left behind");
+    assert!(
+        leftovers(seq.parent().unwrap()).is_empty(),
+        "staging left: {:?}",
+        leftovers(seq.parent().unwrap())
+    );
+}
+
+#[test]
+fn bad_inputs_give_one_line_errors_and_no_output() {
+    // a corrupt JPEG
+    let s = copy_of("rectify_bad_jpeg");
+    let raw = Sequence::open(&s).unwrap();
+    let entries: Vec<(String, Vec<u8>)> = (0..raw.len())
+        .map(|k| {
+            let mut b = raw.raw(k).unwrap();
+            if k == 5 {
+                // an interrupted copy: the entropy-coded data ends early
+                b.truncate(b.len() / 3);
+            }
+            (raw.names()[k].clone(), b)
+        })
+        .collect();
+    drop(raw);
+    dataset_io::write_images_zip(&s.join("images.zip"), entries).unwrap();
+    expect_clean_failure(&s, &[], &["images.zip", "00005.jpg"]);
+
+    // times.txt one row short
+    let s = copy_of("rectify_bad_times");
+    let t = std::fs::read_to_string(s.join("times.txt")).unwrap();
+    std::fs::write(
+        s.join("times.txt"),
+        t.lines()
+            .skip(1)
+            .map(|l| format!("{l}\n"))
+            .collect::<String>(),
+    )
+    .unwrap();
+    expect_clean_failure(&s, &[], &["times.txt", "7 rows", "8 images"]);
+
+    // camera.txt whose size disagrees with the images
+    let s = copy_of("rectify_bad_camera");
+    let c = std::fs::read_to_string(s.join("camera.txt")).unwrap();
+    std::fs::write(s.join("camera.txt"), c.replace("1280 1024", "640 512")).unwrap();
+    expect_clean_failure(&s, &[], &["camera.txt", "line 2", "1280x1024"]);
+
+    // pcalib with NaN, and with a dip
+    let s = copy_of("rectify_bad_pcalib");
+    let p = std::fs::read_to_string(s.join("pcalib.txt")).unwrap();
+    let mut v: Vec<String> = p.split_whitespace().map(String::from).collect();
+    v[30] = "NaN".into();
+    std::fs::write(s.join("pcalib.txt"), v.join(" ")).unwrap();
+    expect_clean_failure(&s, &["--photometric"], &["pcalib.txt", "U(30)"]);
+    let mut v: Vec<String> = p.split_whitespace().map(String::from).collect();
+    v[200] = "1.0".into();
+    std::fs::write(s.join("pcalib.txt"), v.join(" ")).unwrap();
+    expect_clean_failure(&s, &["--photometric"], &["pcalib.txt", "U(200)"]);
+
+    // irradiance without exposures
+    let s = copy_of("rectify_no_exposure");
+    let t = std::fs::read_to_string(s.join("times.txt")).unwrap();
+    let two: String = t
+        .lines()
+        .map(|l| l.split_whitespace().take(2).collect::<Vec<_>>().join(" ") + "\n")
+        .collect();
+    std::fs::write(s.join("times.txt"), two).unwrap();
+    expect_clean_failure(&s, &["--irradiance"], &["times.txt", "exposure"]);
+}

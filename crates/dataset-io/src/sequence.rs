@@ -1,0 +1,421 @@
+//! Reading a benchmark sequence folder: `images.zip` (flat or with an `images/` prefix inside)
+//! or `images/`, `times.txt`, `camera.txt`, and the optional calibration and ground-truth
+//! files; random access, forwards and backwards playback, and parallel decoding that keeps
+//! the order.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use camera_model::{CameraFile, Image, ImageSize};
+use rayon::prelude::*;
+
+use crate::times::{parse_times, Times};
+use crate::{read_text, DatasetError};
+
+/// Where the images come from.
+#[derive(Debug)]
+enum Source {
+    Zip {
+        path: PathBuf,
+        archive: Mutex<zip::ZipArchive<File>>,
+        /// Archive index of each image, sorted by name.
+        indices: Vec<usize>,
+    },
+    Folder {
+        files: Vec<PathBuf>,
+    },
+}
+
+/// One decoded frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Index in the sequence (0-based, in name order).
+    pub index: usize,
+    /// The image's name (zip entry or file name).
+    pub name: String,
+    /// 8-bit grey pixels.
+    pub image: Image<u8>,
+    /// Timestamp in seconds (times.txt).
+    pub timestamp: f64,
+    /// Exposure in ms, when known.
+    pub exposure_ms: Option<f64>,
+}
+
+/// An opened, validated sequence.
+#[derive(Debug)]
+pub struct Sequence {
+    dir: PathBuf,
+    source: Source,
+    names: Vec<String>,
+    times: Times,
+    times_path: PathBuf,
+    camera: Option<CameraFile>,
+    size: ImageSize,
+    /// `pcalib.txt`, if present.
+    pub pcalib_path: Option<PathBuf>,
+    /// `vignette.png`, if present.
+    pub vignette_path: Option<PathBuf>,
+    /// `groundtruthSync.txt`, if present.
+    pub ground_truth_path: Option<PathBuf>,
+}
+
+const IMAGE_EXTS: [&str; 4] = ["jpg", "jpeg", "png", "pgm"];
+
+fn is_image_name(name: &str) -> bool {
+    let lower = name.to_ascii_lowercase();
+    let base = lower.rsplit('/').next().unwrap_or(&lower);
+    !base.starts_with('.')
+        && !lower.starts_with("__macosx")
+        && IMAGE_EXTS.iter().any(|e| base.ends_with(&format!(".{e}")))
+}
+
+/// Decodes a JPEG to 8-bit grey, strictly: truncated or corrupt entropy-coded data is an
+/// error instead of a silently grey or smeared frame.
+fn decode_jpeg_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
+    use zune_jpeg::zune_core::bytestream::ZCursor;
+    use zune_jpeg::zune_core::colorspace::ColorSpace;
+    use zune_jpeg::zune_core::options::DecoderOptions;
+    let opts = DecoderOptions::default()
+        .set_strict_mode(true)
+        .jpeg_set_out_colorspace(ColorSpace::Luma);
+    let mut d = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), opts);
+    d.decode_headers()
+        .map_err(|e| format!("corrupt JPEG: {e:?}"))?;
+    let (w, h) = d
+        .dimensions()
+        .ok_or_else(|| "corrupt JPEG: no frame header".to_string())?;
+    let data = d.decode().map_err(|e| format!("corrupt JPEG: {e:?}"))?;
+    if data.len() != w * h {
+        return Err(format!(
+            "corrupt JPEG: {} samples decoded for {w}x{h}",
+            data.len()
+        ));
+    }
+    Image::new(w, h, data).map_err(|e| e.to_string())
+}
+
+/// Decodes JPEG, PNG or PGM bytes to 8-bit grey (colour images are converted to luma; 16-bit
+/// images are scaled down). The error text says what failed.
+pub fn decode_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        return decode_jpeg_gray8(bytes);
+    }
+    let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+    let g = img.into_luma8();
+    let (w, h) = (g.width() as usize, g.height() as usize);
+    Image::new(w, h, g.into_raw()).map_err(|e| e.to_string())
+}
+
+/// Decodes a PNG (8- or 16-bit grey, or colour converted to luma) to 16-bit grey, and tells
+/// whether the file had 16 bits per sample.
+pub fn decode_gray16(bytes: &[u8]) -> Result<(Image<u16>, bool), String> {
+    let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+    let sixteen = matches!(
+        img.color(),
+        image::ColorType::L16
+            | image::ColorType::La16
+            | image::ColorType::Rgb16
+            | image::ColorType::Rgba16
+    );
+    let g = img.into_luma16();
+    let (w, h) = (g.width() as usize, g.height() as usize);
+    let data = if sixteen {
+        g.into_raw()
+    } else {
+        // into_luma16 scales 8-bit values by 257; keep the original 0..255 values
+        g.into_raw().into_iter().map(|v| v / 257).collect()
+    };
+    Image::new(w, h, data)
+        .map(|i| (i, sixteen))
+        .map_err(|e| e.to_string())
+}
+
+/// Reads an image file as 16-bit grey (see [`decode_gray16`]).
+pub fn read_gray16(path: &Path) -> Result<(Image<u16>, bool), DatasetError> {
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    decode_gray16(&bytes).map_err(|m| DatasetError::invalid(path, m))
+}
+
+/// Reads an image file as 8-bit grey.
+pub fn read_gray8(path: &Path) -> Result<Image<u8>, DatasetError> {
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    decode_gray8(&bytes).map_err(|m| DatasetError::invalid(path, m))
+}
+
+fn optional(dir: &Path, name: &str) -> Option<PathBuf> {
+    let p = dir.join(name);
+    p.is_file().then_some(p)
+}
+
+impl Sequence {
+    /// Opens and validates a sequence folder: the images (`images.zip` preferred, else
+    /// `images/`), times.txt (one row per image, increasing timestamps), camera.txt when
+    /// present (its input size must match the images).
+    pub fn open(dir: &Path) -> Result<Sequence, DatasetError> {
+        if !dir.is_dir() {
+            return Err(DatasetError::invalid(dir, "not a sequence folder"));
+        }
+        let zip_path = dir.join("images.zip");
+        let folder = dir.join("images");
+        let (source, names) = if zip_path.is_file() {
+            let f = File::open(&zip_path).map_err(|e| DatasetError::io(&zip_path, e))?;
+            let archive = zip::ZipArchive::new(f).map_err(|e| {
+                DatasetError::invalid(&zip_path, format!("not a readable zip: {e}"))
+            })?;
+            let mut entries: Vec<(String, usize)> = (0..archive.len())
+                .filter_map(|i| {
+                    let name = archive.name_for_index(i)?.ok()?.to_string();
+                    is_image_name(&name).then_some((name, i))
+                })
+                .collect();
+            entries.sort();
+            let names: Vec<String> = entries.iter().map(|e| e.0.clone()).collect();
+            let indices = entries.iter().map(|e| e.1).collect();
+            (
+                Source::Zip {
+                    path: zip_path.clone(),
+                    archive: Mutex::new(archive),
+                    indices,
+                },
+                names,
+            )
+        } else if folder.is_dir() {
+            let rd = std::fs::read_dir(&folder).map_err(|e| DatasetError::io(&folder, e))?;
+            let mut files = Vec::new();
+            for e in rd {
+                let e = e.map_err(|e| DatasetError::io(&folder, e))?;
+                let name = e.file_name().to_string_lossy().into_owned();
+                if is_image_name(&name) && e.path().is_file() {
+                    files.push(e.path());
+                }
+            }
+            files.sort();
+            let names = files
+                .iter()
+                .map(|p| {
+                    p.file_name()
+                        .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+                })
+                .collect();
+            (Source::Folder { files }, names)
+        } else {
+            return Err(DatasetError::invalid(
+                dir,
+                "no images.zip and no images/ folder in this sequence",
+            ));
+        };
+        let images_label = match &source {
+            Source::Zip { path, .. } => path.clone(),
+            Source::Folder { .. } => folder.clone(),
+        };
+        if names.is_empty() {
+            return Err(DatasetError::invalid(
+                &images_label,
+                "contains no .jpg or .png images",
+            ));
+        }
+        let times_path = dir.join("times.txt");
+        let times = parse_times(&read_text(&times_path)?, &times_path)?;
+        if times.rows.len() != names.len() {
+            return Err(DatasetError::invalid(
+                &times_path,
+                format!(
+                    "has {} rows but {} has {} images; there must be one row per image",
+                    times.rows.len(),
+                    images_label.display(),
+                    names.len()
+                ),
+            ));
+        }
+        let mut seq = Sequence {
+            dir: dir.to_path_buf(),
+            source,
+            names,
+            times,
+            times_path,
+            camera: None,
+            size: ImageSize::new(0, 0),
+            pcalib_path: optional(dir, "pcalib.txt"),
+            vignette_path: optional(dir, "vignette.png"),
+            ground_truth_path: optional(dir, "groundtruthSync.txt"),
+        };
+        let first = seq.decode(0)?;
+        seq.size = ImageSize::new(first.width(), first.height());
+        let camera_path = dir.join("camera.txt");
+        if camera_path.is_file() {
+            let cam = CameraFile::parse(&read_text(&camera_path)?)
+                .map_err(|e| DatasetError::invalid(&camera_path, e.to_string()))?;
+            if cam.input_size != seq.size {
+                return Err(DatasetError::invalid(
+                    &camera_path,
+                    format!(
+                        "line 2: the camera is {} but the images are {} ({})",
+                        cam.input_size, seq.size, seq.names[0]
+                    ),
+                ));
+            }
+            seq.camera = Some(cam);
+        }
+        Ok(seq)
+    }
+
+    /// The sequence folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Number of images.
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Whether the sequence has no image (never true for an opened sequence).
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+
+    /// Image names in playback order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// times.txt.
+    pub fn times(&self) -> &Times {
+        &self.times
+    }
+
+    /// Path of times.txt.
+    pub fn times_path(&self) -> &Path {
+        &self.times_path
+    }
+
+    /// camera.txt, when present.
+    pub fn camera(&self) -> Option<&CameraFile> {
+        self.camera.as_ref()
+    }
+
+    /// Size of the images (from the first one).
+    pub fn image_size(&self) -> ImageSize {
+        self.size
+    }
+
+    /// Whether the images come from images.zip.
+    pub fn is_zipped(&self) -> bool {
+        matches!(self.source, Source::Zip { .. })
+    }
+
+    fn label(&self, k: usize) -> String {
+        match &self.source {
+            Source::Zip { path, .. } => format!("{}: {}", path.display(), self.names[k]),
+            Source::Folder { files } => files[k].display().to_string(),
+        }
+    }
+
+    /// The encoded bytes of image `k`.
+    pub fn raw(&self, k: usize) -> Result<Vec<u8>, DatasetError> {
+        if k >= self.len() {
+            return Err(DatasetError::invalid(
+                &self.dir,
+                format!(
+                    "frame {k} requested, the sequence has {} frames",
+                    self.len()
+                ),
+            ));
+        }
+        match &self.source {
+            Source::Zip {
+                path,
+                archive,
+                indices,
+            } => {
+                let mut a = archive.lock().map_err(|_| {
+                    DatasetError::invalid(path, "zip reader poisoned by an earlier failure")
+                })?;
+                let mut f = a.by_index(indices[k]).map_err(|e| {
+                    DatasetError::invalid(path, format!("{}: unreadable entry: {e}", self.names[k]))
+                })?;
+                let mut buf = Vec::with_capacity(f.size() as usize);
+                f.read_to_end(&mut buf).map_err(|e| {
+                    DatasetError::invalid(
+                        path,
+                        format!("{}: truncated or corrupt entry: {e}", self.names[k]),
+                    )
+                })?;
+                Ok(buf)
+            }
+            Source::Folder { files } => {
+                std::fs::read(&files[k]).map_err(|e| DatasetError::io(&files[k], e))
+            }
+        }
+    }
+
+    /// Decodes image `k` to 8-bit grey; the error names the file or zip entry.
+    pub fn decode(&self, k: usize) -> Result<Image<u8>, DatasetError> {
+        let bytes = self.raw(k)?;
+        let img = decode_gray8(&bytes).map_err(|m| DatasetError::invalid(self.label(k), m))?;
+        if self.size.width != 0
+            && (img.width(), img.height()) != (self.size.width, self.size.height)
+        {
+            return Err(DatasetError::invalid(
+                self.label(k),
+                format!(
+                    "is {}x{}, the sequence's images are {}",
+                    img.width(),
+                    img.height(),
+                    self.size
+                ),
+            ));
+        }
+        Ok(img)
+    }
+
+    /// Frame `k`: decoded image, timestamp and exposure.
+    pub fn frame(&self, k: usize) -> Result<Frame, DatasetError> {
+        let image = self.decode(k)?;
+        let row = &self.times.rows[k];
+        Ok(Frame {
+            index: k,
+            name: self.names[k].clone(),
+            image,
+            timestamp: row.timestamp,
+            exposure_ms: row.exposure_ms,
+        })
+    }
+
+    /// Frame indices of `range` (clamped to the sequence), forwards or backwards.
+    pub fn indices(&self, range: std::ops::Range<usize>, reverse: bool) -> Vec<usize> {
+        let r = range.start.min(self.len())..range.end.min(self.len());
+        if reverse {
+            r.rev().collect()
+        } else {
+            r.collect()
+        }
+    }
+
+    /// Decodes the frames `indices` in parallel and hands `work`'s results to `sink` in the
+    /// order of `indices`. Work runs in parallel chunks of `chunk` frames, so memory stays
+    /// flat in the number of frames. Stops at the first error.
+    pub fn process<T, E, W, S>(
+        &self,
+        indices: &[usize],
+        chunk: usize,
+        work: W,
+        mut sink: S,
+    ) -> Result<(), E>
+    where
+        T: Send,
+        E: From<DatasetError> + Send,
+        W: Fn(Frame) -> Result<T, E> + Sync,
+        S: FnMut(T) -> Result<(), E>,
+    {
+        for part in indices.chunks(chunk.max(1)) {
+            let out: Vec<Result<T, E>> = part.par_iter().map(|&k| work(self.frame(k)?)).collect();
+            for r in out {
+                sink(r?)?;
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,144 @@
+//! `times.txt`: one line per image, `id timestamp_s exposure_ms`; two columns mean unknown
+//! exposure.
+
+use std::path::Path;
+
+use crate::DatasetError;
+
+/// One row of times.txt.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeRow {
+    /// The image id as written (usually the file stem, `00000`).
+    pub id: String,
+    /// Timestamp in seconds.
+    pub timestamp: f64,
+    /// Exposure time in milliseconds, `None` when the file has no third column.
+    pub exposure_ms: Option<f64>,
+}
+
+/// A parsed times.txt, with the notes about what was repaired.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Times {
+    /// The rows, in file order.
+    pub rows: Vec<TimeRow>,
+    /// Warnings (for example interpolated zero exposures).
+    pub warnings: Vec<String>,
+}
+
+impl Times {
+    /// Whether every row has a positive exposure.
+    pub fn has_exposures(&self) -> bool {
+        !self.rows.is_empty()
+            && self
+                .rows
+                .iter()
+                .all(|r| r.exposure_ms.is_some_and(|e| e > 0.0))
+    }
+
+    /// Smallest and largest exposure in ms, if known.
+    pub fn exposure_range(&self) -> Option<(f64, f64)> {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for r in &self.rows {
+            let e = r.exposure_ms?;
+            lo = lo.min(e);
+            hi = hi.max(e);
+        }
+        lo.is_finite().then_some((lo, hi))
+    }
+}
+
+fn excerpt(s: &str) -> String {
+    s.trim().chars().take(100).collect()
+}
+
+/// Parses times.txt. Timestamps must be finite and strictly increasing; exposures finite and
+/// non-negative. A zero exposure between two known ones is interpolated (as DSO does) with a
+/// warning; other zero exposures are kept (the caller decides whether it needs them).
+pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
+    let mut rows: Vec<TimeRow> = Vec::new();
+    let mut columns: Option<usize> = None;
+    let mut prev: Option<f64> = None;
+    for (i, line) in text.lines().enumerate() {
+        let no = i + 1;
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let f: Vec<&str> = t.split_whitespace().collect();
+        let bad = |expected: &str| DatasetError::Parse {
+            path: path.to_path_buf(),
+            line: no,
+            expected: expected.into(),
+            found: excerpt(t),
+        };
+        if f.len() != 2 && f.len() != 3 {
+            return Err(bad(
+                "`id timestamp_s exposure_ms` (3 columns) or `id timestamp_s`",
+            ));
+        }
+        if let Some(c) = columns {
+            if c != f.len() {
+                return Err(bad(&format!("{c} columns like the lines before")));
+            }
+        }
+        columns = Some(f.len());
+        let timestamp = f[1]
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| bad("a finite timestamp in seconds in column 2"))?;
+        if let Some(p) = prev {
+            if timestamp <= p {
+                return Err(bad(&format!(
+                    "a timestamp after the previous one ({p}); timestamps must strictly increase"
+                )));
+            }
+        }
+        prev = Some(timestamp);
+        let exposure_ms = match f.get(2) {
+            Some(e) => Some(
+                e.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| bad("a finite, non-negative exposure in ms in column 3"))?,
+            ),
+            None => None,
+        };
+        rows.push(TimeRow {
+            id: f[0].to_string(),
+            timestamp,
+            exposure_ms,
+        });
+    }
+    let mut warnings = Vec::new();
+    // interpolate isolated zero exposures between two known ones
+    for i in 1..rows.len().saturating_sub(1) {
+        if rows[i].exposure_ms == Some(0.0) {
+            if let (Some(a), Some(b)) = (rows[i - 1].exposure_ms, rows[i + 1].exposure_ms) {
+                if a > 0.0 && b > 0.0 {
+                    rows[i].exposure_ms = Some(0.5 * (a + b));
+                    warnings.push(format!(
+                        "{}: line {}: exposure 0 interpolated to {} ms from its neighbours",
+                        path.display(),
+                        i + 1,
+                        0.5 * (a + b)
+                    ));
+                }
+            }
+        }
+    }
+    Ok(Times { rows, warnings })
+}
+
+/// Writes times.txt (`id timestamp exposure`, or two columns when no exposure is known).
+pub fn times_text(rows: &[TimeRow]) -> String {
+    let mut s = String::with_capacity(rows.len() * 40);
+    for r in rows {
+        match r.exposure_ms {
+            Some(e) => s.push_str(&format!("{} {:.6} {}\n", r.id, r.timestamp, e)),
+            None => s.push_str(&format!("{} {:.6}\n", r.id, r.timestamp)),
+        }
+    }
+    s
+}

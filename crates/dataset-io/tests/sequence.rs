@@ -1,0 +1,207 @@
+//! Opening, validating and reading sequence folders.
+use camera_model::Image;
+use dataset_io::{
+    encode_jpeg_gray, encode_png_u8, parse_times, write_images_zip, DatasetError, PngSpeed,
+    Sequence, SequenceWriter, TimeRow,
+};
+use std::path::{Path, PathBuf};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("dataset-io-seq-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn pattern(i: usize, w: usize, h: usize) -> Vec<u8> {
+    (0..w * h)
+        .map(|p| ((p % w) * 3 + (p / w) * 5 + i * 40) as u8)
+        .collect()
+}
+
+const CAMERA: &str = "FOV 0.5357 0.6696 0.4932 0.5004 0.898\n64 48\ncrop\n32 24\n";
+
+/// A sequence folder of `n` 64x48 JPEG frames in images.zip under `prefix`.
+fn make(dir: &Path, n: usize, prefix: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    let entries = (0..n).map(|i| {
+        (
+            format!("{prefix}{i:05}.jpg"),
+            encode_jpeg_gray(64, 48, &pattern(i, 64, 48), 95).unwrap(),
+        )
+    });
+    write_images_zip(&dir.join("images.zip"), entries).unwrap();
+    let times: String = (0..n)
+        .map(|i| format!("{i:05} {} {}\n", 100.0 + i as f64 * 0.05, 5.0 + i as f64))
+        .collect();
+    std::fs::write(dir.join("times.txt"), times).unwrap();
+    std::fs::write(dir.join("camera.txt"), CAMERA).unwrap();
+}
+
+#[test]
+fn zipped_flat_prefixed_and_folder_sequences_read_the_same() {
+    let d = tmp("layouts");
+    make(&d.join("flat"), 5, "");
+    make(&d.join("prefixed"), 5, "images/");
+    let folder = d.join("folder");
+    std::fs::create_dir_all(folder.join("images")).unwrap();
+    for i in 0..5 {
+        std::fs::write(
+            folder.join(format!("images/{i:05}.png")),
+            encode_png_u8(64, 48, 1, &pattern(i, 64, 48), PngSpeed::Fast).unwrap(),
+        )
+        .unwrap();
+    }
+    std::fs::copy(d.join("flat/times.txt"), folder.join("times.txt")).unwrap();
+    let a = Sequence::open(&d.join("flat")).unwrap();
+    let b = Sequence::open(&d.join("prefixed")).unwrap();
+    let c = Sequence::open(&folder).unwrap();
+    assert_eq!(a.len(), 5);
+    assert!(a.is_zipped() && !c.is_zipped());
+    assert_eq!(a.image_size(), camera_model::ImageSize::new(64, 48));
+    assert_eq!(a.decode(3).unwrap(), b.decode(3).unwrap());
+    // the PNG folder is lossless
+    assert_eq!(
+        c.decode(2).unwrap(),
+        Image::new(64, 48, pattern(2, 64, 48)).unwrap()
+    );
+    let f = a.frame(4).unwrap();
+    assert_eq!((f.index, f.timestamp, f.exposure_ms), (4, 100.2, Some(9.0)));
+    assert!(a.camera().is_some() && c.camera().is_none());
+    assert_eq!(a.indices(1..4, true), vec![3, 2, 1]);
+    assert_eq!(a.indices(3..99, false), vec![3, 4]);
+}
+
+#[test]
+fn parallel_processing_keeps_the_order() {
+    let d = tmp("order");
+    make(&d, 23, "");
+    let s = Sequence::open(&d).unwrap();
+    let idx = s.indices(0..23, true);
+    let mut seen = Vec::new();
+    s.process(
+        &idx,
+        4,
+        |f| Ok::<_, DatasetError>(f.index),
+        |i| {
+            seen.push(i);
+            Ok(())
+        },
+    )
+    .unwrap();
+    assert_eq!(seen, idx);
+}
+
+fn open_err(dir: &Path) -> String {
+    Sequence::open(dir).unwrap_err().to_string()
+}
+
+#[test]
+fn bad_sequences_name_the_file_and_what_is_wrong() {
+    let d = tmp("bad");
+    // one times.txt row too few
+    make(&d.join("short"), 4, "");
+    let t = std::fs::read_to_string(d.join("short/times.txt")).unwrap();
+    std::fs::write(
+        d.join("short/times.txt"),
+        t.lines()
+            .take(3)
+            .map(|l| format!("{l}\n"))
+            .collect::<String>(),
+    )
+    .unwrap();
+    let e = open_err(&d.join("short"));
+    assert!(
+        e.contains("times.txt") && e.contains("3 rows") && e.contains("4 images"),
+        "{e}"
+    );
+    // camera size disagrees
+    make(&d.join("cam"), 3, "");
+    std::fs::write(
+        d.join("cam/camera.txt"),
+        CAMERA.replace("64 48", "1280 1024"),
+    )
+    .unwrap();
+    let e = open_err(&d.join("cam"));
+    assert!(
+        e.contains("camera.txt") && e.contains("line 2") && e.contains("64x48"),
+        "{e}"
+    );
+    // non-monotone timestamps
+    make(&d.join("order"), 3, "");
+    std::fs::write(d.join("order/times.txt"), "0 1.0 5\n1 0.5 5\n2 2.0 5\n").unwrap();
+    let e = open_err(&d.join("order"));
+    assert!(e.contains("times.txt") && e.contains("line 2"), "{e}");
+    // a corrupt JPEG is reported with its entry name when decoded
+    make(&d.join("corrupt"), 3, "");
+    let entries = (0..3).map(|i| {
+        let mut b = encode_jpeg_gray(64, 48, &pattern(i, 64, 48), 95).unwrap();
+        if i == 2 {
+            b.truncate(100);
+        }
+        (format!("{i:05}.jpg"), b)
+    });
+    write_images_zip(&d.join("corrupt/images.zip"), entries).unwrap();
+    let s = Sequence::open(&d.join("corrupt")).unwrap();
+    let e = s.decode(2).unwrap_err().to_string();
+    assert!(e.contains("images.zip") && e.contains("00002.jpg"), "{e}");
+    // not a zip at all
+    make(&d.join("notzip"), 2, "");
+    std::fs::write(d.join("notzip/images.zip"), b"garbage").unwrap();
+    let e = open_err(&d.join("notzip"));
+    assert!(e.contains("images.zip") && e.contains("zip"), "{e}");
+    // no images at all
+    std::fs::create_dir_all(d.join("empty")).unwrap();
+    assert!(open_err(&d.join("empty")).contains("no images.zip"));
+}
+
+#[test]
+fn times_txt_rules() {
+    let p = Path::new("times.txt");
+    let t = parse_times("0 1.0 5\n1 1.1 0\n2 1.2 7\n", p).unwrap();
+    assert_eq!(t.rows[1].exposure_ms, Some(6.0));
+    assert_eq!(t.warnings.len(), 1);
+    assert!(t.has_exposures());
+    let t = parse_times("0 1.0\n1 1.1\n", p).unwrap();
+    assert!(!t.has_exposures() && t.exposure_range().is_none());
+    for (bad, line) in [
+        ("0 1.0 5\n1 1.1\n", 2),
+        ("0 x 5\n", 1),
+        ("0 1.0 -1\n", 1),
+        ("0 1 2 3\n", 1),
+        ("0 1.0 nan\n", 1),
+    ] {
+        match parse_times(bad, p) {
+            Err(DatasetError::Parse { line: l, .. }) => assert_eq!(l, line, "{bad}"),
+            other => panic!("{bad}: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn written_sequences_read_back() {
+    let d = tmp("write");
+    for zipped in [false, true] {
+        let out = d.join(if zipped { "z" } else { "f" });
+        let mut w = SequenceWriter::create(&out, zipped, false).unwrap();
+        for i in 0..4 {
+            let png = encode_png_u8(64, 48, 1, &pattern(i, 64, 48), PngSpeed::Fast).unwrap();
+            w.add_frame(
+                TimeRow {
+                    id: format!("{i:05}"),
+                    timestamp: i as f64,
+                    exposure_ms: Some(2.0),
+                },
+                &png,
+            )
+            .unwrap();
+        }
+        w.add_file("camera.txt", CAMERA.as_bytes()).unwrap();
+        w.finish().unwrap();
+        let s = Sequence::open(&out).unwrap();
+        assert_eq!(s.len(), 4);
+        assert_eq!(s.is_zipped(), zipped);
+        assert_eq!(s.decode(3).unwrap().data(), &pattern(3, 64, 48)[..]);
+        assert!(SequenceWriter::create(&out, zipped, false).is_err());
+    }
+}

@@ -1,0 +1,164 @@
+//! Undoing response and vignetting, per the paper's image formation model
+//! `I(x) = G(t V(x) B(x))`: `U(I(x)) / V(x)` is proportional to `t B(x)`, and dividing by the
+//! exposure `t` gives the irradiance `B(x)` (up to the common scale of `U` and `V`).
+
+use camera_model::{Image, RectifyMap};
+
+use crate::{InverseResponse, PhotometricError, Vignette};
+
+/// A precomputed photometric correction, optionally fused with a rectification map (the
+/// vignette is then remapped once into output coordinates).
+#[derive(Clone, Debug)]
+pub struct Correction {
+    map: Option<RectifyMap>,
+    lut: [f32; 256],
+    inv_v: Option<Vec<f32>>,
+    in_size: (usize, usize),
+    out_size: (usize, usize),
+}
+
+impl Correction {
+    /// Builds the correction. With `mask_saturated`, output pixels that touch a saturated
+    /// (255) input pixel become invalid (NaN), since their irradiance is unknown. Masked
+    /// vignette pixels are invalid too.
+    pub fn new(
+        response: &InverseResponse,
+        vignette: Option<&Vignette>,
+        map: Option<RectifyMap>,
+        in_size: (usize, usize),
+        mask_saturated: bool,
+    ) -> Result<Correction, PhotometricError> {
+        let mut lut = response.lut();
+        if mask_saturated {
+            lut[255] = f32::NAN;
+        }
+        if let Some(m) = &map {
+            let s = m.input_size();
+            if (s.width, s.height) != in_size {
+                return Err(PhotometricError::SizeMismatch {
+                    what: "the rectification map's input",
+                    width: in_size.0,
+                    height: in_size.1,
+                    got_width: s.width,
+                    got_height: s.height,
+                });
+            }
+        }
+        let out_size = map
+            .as_ref()
+            .map_or(in_size, |m| (m.output_size().width, m.output_size().height));
+        let inv_v = match vignette {
+            None => None,
+            Some(v) => {
+                v.check_size(in_size.0, in_size.1)?;
+                // masked (zero) vignette pixels become NaN so that they poison the output
+                let vv = v.values().map(|x| if x > 0.0 { x } else { f32::NAN });
+                let out = match &map {
+                    Some(m) => m.remap_f32(&vv)?,
+                    None => vv,
+                };
+                Some(out.data().iter().map(|x| 1.0 / x).collect())
+            }
+        };
+        Ok(Correction {
+            map,
+            lut,
+            inv_v,
+            in_size,
+            out_size,
+        })
+    }
+
+    /// Output size.
+    pub fn output_size(&self) -> (usize, usize) {
+        self.out_size
+    }
+
+    /// Corrects one frame into `out` (output size): `U(I) / V`, divided by the exposure in
+    /// ms when `exposure_ms` is given. Invalid pixels are NaN.
+    pub fn apply(
+        &self,
+        img: &Image<u8>,
+        exposure_ms: Option<f64>,
+        out: &mut Image<f32>,
+    ) -> Result<(), PhotometricError> {
+        if img.size() != self.in_size {
+            return Err(PhotometricError::SizeMismatch {
+                what: "the image",
+                width: self.in_size.0,
+                height: self.in_size.1,
+                got_width: img.width(),
+                got_height: img.height(),
+            });
+        }
+        if out.size() != self.out_size {
+            return Err(PhotometricError::SizeMismatch {
+                what: "the output image",
+                width: self.out_size.0,
+                height: self.out_size.1,
+                got_width: out.width(),
+                got_height: out.height(),
+            });
+        }
+        let scale = match exposure_ms {
+            Some(t) if t > 0.0 && t.is_finite() => (1.0 / t) as f32,
+            Some(t) => return Err(PhotometricError::Exposure(t)),
+            None => 1.0,
+        };
+        match &self.map {
+            Some(m) => m.remap_u8_lut_into(img, &self.lut, out)?,
+            None => {
+                for (o, &p) in out.data_mut().iter_mut().zip(img.data()) {
+                    *o = self.lut[p as usize];
+                }
+            }
+        }
+        match &self.inv_v {
+            Some(iv) => {
+                for (o, &k) in out.data_mut().iter_mut().zip(iv) {
+                    *o *= k * scale;
+                }
+            }
+            None if scale != 1.0 => {
+                for o in out.data_mut() {
+                    *o *= scale;
+                }
+            }
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// Allocating variant of [`Correction::apply`].
+    pub fn correct(
+        &self,
+        img: &Image<u8>,
+        exposure_ms: Option<f64>,
+    ) -> Result<Image<f32>, PhotometricError> {
+        let mut out = Image::filled(self.out_size.0, self.out_size.1, 0f32);
+        self.apply(img, exposure_ms, &mut out)?;
+        Ok(out)
+    }
+}
+
+/// Re-quantises to 8 bits: `round(v * scale)` clamped to 0..255; invalid (NaN) pixels are 0.
+pub fn quantize_u8(img: &Image<f32>, scale: f32) -> Image<u8> {
+    img.map(|v| {
+        if v.is_nan() {
+            0
+        } else {
+            (v * scale).round().clamp(0.0, 255.0) as u8
+        }
+    })
+}
+
+/// Re-quantises to 16 bits: `round(v * scale)` clamped to 0..65535; invalid pixels are 0.
+pub fn quantize_u16(img: &Image<f32>, scale: f32) -> Image<u16> {
+    img.map(|v| {
+        if v.is_nan() {
+            0
+        } else {
+            (v * scale).round().clamp(0.0, 65535.0) as u16
+        }
+    })
+}

@@ -1,0 +1,90 @@
+//! The vignette `V`: per-pixel attenuation in `[0, 1]`, stored as an 8- or 16-bit grey PNG
+//! normalised by its maximum.
+
+use camera_model::Image;
+
+use crate::PhotometricError;
+
+/// A dense vignette map, `max(V) = 1`. Pixels with `V = 0` (for example a black border in the
+/// PNG) are masked: the correction marks them invalid instead of dividing by zero.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vignette {
+    v: Image<f32>,
+    masked: usize,
+}
+
+impl Vignette {
+    /// Normalises a map of any scale by its maximum. Fails when no value is positive or a
+    /// value is not finite or negative.
+    pub fn from_values(values: Image<f32>) -> Result<Vignette, PhotometricError> {
+        let mut max = 0.0f32;
+        for &v in values.data() {
+            if !v.is_finite() || v < 0.0 {
+                return Err(PhotometricError::Vignette(format!(
+                    "value {v} is not finite and non-negative"
+                )));
+            }
+            max = max.max(v);
+        }
+        if max <= 0.0 {
+            return Err(PhotometricError::Vignette(
+                "every pixel is 0 (an empty or failed calibration)".into(),
+            ));
+        }
+        let masked = values.data().iter().filter(|v| **v == 0.0).count();
+        Ok(Vignette {
+            v: values.map(|x| x / max),
+            masked,
+        })
+    }
+
+    /// From a 16-bit (or 8-bit widened) grey image.
+    pub fn from_u16(img: &Image<u16>) -> Result<Vignette, PhotometricError> {
+        Vignette::from_values(img.map(|v| v as f32))
+    }
+
+    /// The map.
+    pub fn values(&self) -> &Image<f32> {
+        &self.v
+    }
+
+    /// Width and height.
+    pub fn size(&self) -> (usize, usize) {
+        self.v.size()
+    }
+
+    /// Number of masked (zero) pixels.
+    pub fn masked(&self) -> usize {
+        self.masked
+    }
+
+    /// Smallest positive value.
+    pub fn min_positive(&self) -> f32 {
+        self.v
+            .data()
+            .iter()
+            .copied()
+            .filter(|v| *v > 0.0)
+            .fold(1.0, f32::min)
+    }
+
+    /// The 16-bit image written as vignette.png (`V = 1` at 65535).
+    pub fn to_u16(&self) -> Image<u16> {
+        self.v
+            .map(|x| (x * 65535.0).round().clamp(0.0, 65535.0) as u16)
+    }
+
+    /// Checks the map against an image size.
+    pub fn check_size(&self, width: usize, height: usize) -> Result<(), PhotometricError> {
+        if self.v.size() != (width, height) {
+            return Err(PhotometricError::SizeMismatch {
+                what: "the vignette",
+                width,
+                height,
+                got_width: self.v.width(),
+                got_height: self.v.height(),
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,114 @@
+//! The correction recovers the irradiance of synthetic frames.
+use camera_model::{CameraFile, Image, OutputMode, RectifyMap};
+use photometric::{quantize_u8, Correction, InverseResponse, Vignette};
+use synthetic::camera::{ground_truth_response, ground_truth_vignette, response_value};
+
+/// Frames made noise-free by the ground-truth model `I = G(t V B)` (continuous, then rounded)
+/// are mapped back to `B` within the quantisation error of one grey level.
+#[test]
+fn correction_inverts_the_image_formation_model() {
+    let (w, h) = (80, 60);
+    let u = ground_truth_response();
+    let vig = ground_truth_vignette(w, h, 3);
+    let b =
+        |x: usize, y: usize| 2.0 + 10.0 * ((x as f64 * 0.3).sin() * (y as f64 * 0.2).cos()).abs();
+    let t = 7.5;
+    let frame = Image::from_fn(w, h, |x, y| {
+        response_value(&u, t * vig[y * w + x] as f64 * b(x, y)).round() as u8
+    });
+    let corr = Correction::new(
+        &InverseResponse::new(u).unwrap(),
+        Some(&Vignette::from_values(Image::new(w, h, vig.clone()).unwrap()).unwrap()),
+        None,
+        (w, h),
+        false,
+    )
+    .unwrap();
+    let out = corr.correct(&frame, Some(t)).unwrap();
+    for y in 0..h {
+        for x in 0..w {
+            let want = b(x, y);
+            let got = out.get(x, y).unwrap() as f64;
+            // one grey level of U's slope at most, divided by t V
+            let k = frame.get(x, y).unwrap() as usize;
+            let slope = if k < 255 {
+                u[k + 1] - u[k]
+            } else {
+                u[255] - u[254]
+            };
+            let tol = 0.5 * slope / (t * vig[y * w + x] as f64) + 1e-6;
+            assert!(
+                (got - want).abs() <= tol,
+                "({x},{y}) {got} vs {want} tol {tol}"
+            );
+        }
+    }
+}
+
+#[test]
+fn saturated_pixels_and_quantisation() {
+    let u = InverseResponse::linear();
+    let corr = Correction::new(&u, None, None, (4, 1), true).unwrap();
+    let img = Image::new(4, 1, vec![0u8, 10, 254, 255]).unwrap();
+    let out = corr.correct(&img, None).unwrap();
+    assert_eq!(&out.data()[..3], &[0.0, 10.0, 254.0]);
+    assert!(out.data()[3].is_nan());
+    assert_eq!(quantize_u8(&out, 0.5).data(), &[0, 5, 127, 0]);
+    assert!(corr.correct(&img, Some(0.0)).is_err());
+    assert!(corr.correct(&Image::filled(3, 1, 0u8), None).is_err());
+}
+
+/// Fused with rectification, the correction equals rectifying the corrected raw frame.
+#[test]
+fn fused_rectification_equals_correct_then_remap() {
+    let cam =
+        CameraFile::parse("FOV 0.5357 0.6696 0.4932 0.5004 0.898\n160 128\ncrop\n80 60\n").unwrap();
+    let map = RectifyMap::for_mode(
+        &cam.input,
+        cam.input_size,
+        &OutputMode::Crop,
+        cam.output_size,
+    )
+    .unwrap();
+    let mut uu = [0.0; 256];
+    for (k, v) in uu.iter_mut().enumerate() {
+        *v = (k as f64 / 255.0).powf(2.0) * 255.0 + k as f64 * 0.01;
+    }
+    let u = InverseResponse::new(uu).unwrap();
+    let vig = Vignette::from_values(Image::from_fn(160, 128, |x, y| {
+        1.0 - 0.002 * ((x as f32 - 80.0).abs() + (y as f32 - 64.0).abs())
+    }))
+    .unwrap();
+    let frame = Image::from_fn(160, 128, |x, y| ((x * 7 + y * 13) % 256) as u8);
+    let fused = Correction::new(&u, Some(&vig), Some(map.clone()), (160, 128), false).unwrap();
+    let raw = Correction::new(&u, Some(&vig), None, (160, 128), false).unwrap();
+    let a = fused.correct(&frame, Some(2.0)).unwrap();
+    // remap(U(I)) / remap(V) vs remap(U(I) / V): bilinear interpolation of a product differs
+    // from the product of interpolations by at most 2 * (1/4) * max|dU| * max|d(1/V)|
+    // (neighbour differences along x and y), divided by the exposure (2 ms); the division by
+    // remap(V) instead of remapping 1/V adds a second-order term far below that.
+    let b = map
+        .remap_f32(&raw.correct(&frame, Some(2.0)).unwrap())
+        .unwrap();
+    let uf = frame.map(|p| u.get(p) as f32);
+    let iv = vig.values().map(|v| 1.0 / v);
+    let max_diff = |img: &Image<f32>| {
+        let mut m = 0f32;
+        for y in 0..img.height() {
+            for x in 0..img.width() {
+                let p = img.get(x, y).unwrap();
+                if let Some(q) = img.get(x + 1, y) {
+                    m = m.max((p - q).abs());
+                }
+                if let Some(q) = img.get(x, y + 1) {
+                    m = m.max((p - q).abs());
+                }
+            }
+        }
+        m
+    };
+    let tol = 0.5 * max_diff(&uf) * max_diff(&iv) / 2.0 * 1.1 + 1e-3;
+    for (x, y) in a.data().iter().zip(b.data()) {
+        assert!((x - y).abs() <= tol, "{x} {y} tol {tol}");
+    }
+}

@@ -1,0 +1,5 @@
+//! Integration tests of photometric.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod correct;
+mod files;

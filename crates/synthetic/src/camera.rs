@@ -1,0 +1,180 @@
+//! Ground-truth photometric and geometric camera: a FOV lens, a non-gamma response, a vignette
+//! that is not radially symmetric, sensor noise and saturation.
+
+use crate::Rng;
+
+/// The benchmark's narrow-lens camera in relative units (DESIGN.md test vector).
+pub const DATASET_CAMERA_RELATIVE: [f64; 5] = [
+    0.535719308086809,
+    0.669566858850269,
+    0.493248545285398,
+    0.500408664348414,
+    0.897966326944875,
+];
+
+/// A FOV camera in pixels for a `width x height` image, built from the relative dataset
+/// camera (pixel centres at integers).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FovCamera {
+    /// Focal length x (px).
+    pub fx: f64,
+    /// Focal length y (px).
+    pub fy: f64,
+    /// Principal point x (px).
+    pub cx: f64,
+    /// Principal point y (px).
+    pub cy: f64,
+    /// FOV parameter.
+    pub omega: f64,
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+}
+
+impl FovCamera {
+    /// The dataset camera scaled to `width x height`.
+    pub fn dataset(width: usize, height: usize) -> FovCamera {
+        let r = DATASET_CAMERA_RELATIVE;
+        FovCamera {
+            fx: r[0] * width as f64,
+            fy: r[1] * height as f64,
+            cx: r[2] * width as f64 - 0.5,
+            cy: r[3] * height as f64 - 0.5,
+            omega: r[4],
+            width,
+            height,
+        }
+    }
+
+    /// camera.txt text (legacy relative FOV line; output `crop` at `out`).
+    pub fn camera_txt(&self, out: (usize, usize)) -> String {
+        let (w, h) = (self.width as f64, self.height as f64);
+        format!(
+            "FOV {} {} {} {} {}\n{} {}\ncrop\n{} {}\n",
+            self.fx / w,
+            self.fy / h,
+            (self.cx + 0.5) / w,
+            (self.cy + 0.5) / h,
+            self.omega,
+            self.width,
+            self.height,
+            out.0,
+            out.1
+        )
+    }
+
+    /// Viewing ray (not normalised, z = 1) of pixel `(u, v)`; `None` beyond 90 degrees.
+    pub fn unproject(&self, u: f64, v: f64) -> Option<[f64; 3]> {
+        let (mx, my) = ((u - self.cx) / self.fx, (v - self.cy) / self.fy);
+        let rd = (mx * mx + my * my).sqrt();
+        if rd * self.omega >= std::f64::consts::FRAC_PI_2 {
+            return None;
+        }
+        let f = if rd < 1e-12 {
+            self.omega / (2.0 * (self.omega / 2.0).tan())
+        } else {
+            (rd * self.omega).tan() / (2.0 * rd * (self.omega / 2.0).tan())
+        };
+        Some([mx * f, my * f, 1.0])
+    }
+
+    /// Pixel of a point in the camera frame (`None` behind the camera).
+    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        if p[2] <= 1e-9 {
+            return None;
+        }
+        let (x, y) = (p[0] / p[2], p[1] / p[2]);
+        let ru = (x * x + y * y).sqrt();
+        let f = if ru < 1e-12 {
+            2.0 * (self.omega / 2.0).tan() / self.omega
+        } else {
+            (2.0 * ru * (self.omega / 2.0).tan()).atan() / (self.omega * ru)
+        };
+        Some([self.fx * f * x + self.cx, self.fy * f * y + self.cy])
+    }
+}
+
+/// The ground-truth inverse response `U(0..255)` with `U(255) = 255`: a smooth, strictly
+/// increasing curve that is not a gamma curve (a toe, a linear middle and a shoulder).
+pub fn ground_truth_response() -> [f64; 256] {
+    let mut u = [0.0; 256];
+    for (k, v) in u.iter_mut().enumerate() {
+        let x = k as f64 / 255.0;
+        *v = 0.55 * x.powf(1.9)
+            + 0.3 * x
+            + 0.15 * (1.0 - (-3.0 * x).exp()) / (1.0 - (-3.0f64).exp());
+    }
+    let s = 255.0 / u[255];
+    u.map(|v| v * s)
+}
+
+/// The camera response `G = U^-1` as a continuous value in `[0, 255]` (before noise and
+/// quantisation): linear interpolation of the inverse of `u`.
+pub fn response_value(u: &[f64; 256], energy: f64) -> f64 {
+    if energy <= u[0] {
+        return 0.0;
+    }
+    if energy >= u[255] {
+        return 255.0;
+    }
+    let k = u.partition_point(|&x| x <= energy).clamp(1, 255);
+    let (a, b) = (u[k - 1], u[k]);
+    (k - 1) as f64 + (energy - a) / (b - a)
+}
+
+/// A ground-truth vignette at `width x height`, `max = 1`, not radially symmetric: an
+/// off-centre radial fall-off of fourth order times a tilt.
+pub fn ground_truth_vignette(width: usize, height: usize, seed: u64) -> Vec<f32> {
+    let mut rng = Rng::derive(seed, 77);
+    let (cx, cy) = (
+        width as f64 * rng.range(0.46, 0.54),
+        height as f64 * rng.range(0.45, 0.55),
+    );
+    let norm = (width as f64).hypot(height as f64) / 2.0;
+    let (a, b) = (rng.range(0.35, 0.45), rng.range(0.1, 0.2));
+    let (tx, ty) = (rng.range(-0.06, 0.06), rng.range(-0.06, 0.06));
+    let mut v = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for x in 0..width {
+            let dx = (x as f64 - cx) / norm;
+            let dy = (y as f64 - cy) / norm * 1.1;
+            let r2 = dx * dx + dy * dy;
+            let tilt = 1.0
+                + tx * (x as f64 / width as f64 - 0.5) * 2.0
+                + ty * (y as f64 / height as f64 - 0.5) * 2.0;
+            v.push(((1.0 - a * r2 - b * r2 * r2) * tilt).max(0.05));
+        }
+    }
+    let max = v.iter().copied().fold(0.0, f64::max);
+    v.into_iter().map(|x| (x / max) as f32).collect()
+}
+
+/// Sensor model: photon-like noise whose variance grows with the signal, read noise, and
+/// quantisation through the response, saturating at 255.
+#[derive(Clone, Copy, Debug)]
+pub struct Sensor {
+    /// Standard deviation of the read noise, in units of `U`.
+    pub read_noise: f64,
+    /// Shot-noise factor: standard deviation `shot * sqrt(energy)`, in units of `U`.
+    pub shot: f64,
+}
+
+impl Default for Sensor {
+    fn default() -> Self {
+        Sensor {
+            read_noise: 0.4,
+            shot: 0.08,
+        }
+    }
+}
+
+impl Sensor {
+    /// The grey value observed for `energy = t V B` (in units of `U`).
+    pub fn observe(&self, u: &[f64; 256], energy: f64, rng: &mut Rng) -> u8 {
+        let sigma =
+            (self.read_noise * self.read_noise + self.shot * self.shot * energy.max(0.0)).sqrt();
+        let e = energy + sigma * rng.normal();
+        response_value(u, e).round().clamp(0.0, 255.0) as u8
+    }
+}

@@ -1,0 +1,309 @@
+//! A textured room rendered through the FOV camera, with vignette, exposure, response and
+//! noise: benchmark-like sequences and exposure sweeps with known truth.
+
+use rayon::prelude::*;
+
+use crate::camera::{ground_truth_response, ground_truth_vignette, FovCamera, Sensor};
+use crate::trajectory::{benchmark_path, mat_vec, Mat3, Path, PathConfig, Vec3};
+use crate::Rng;
+
+fn hash(seed: u64, x: i64, y: i64) -> f64 {
+    let mut h = seed
+        ^ (x as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (y as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    h ^= h >> 33;
+    h = h.wrapping_mul(0xFF51_AFD7_ED55_8CCD);
+    h ^= h >> 33;
+    h = h.wrapping_mul(0xC4CE_B9FE_1A85_EC53);
+    h ^= h >> 33;
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
+    let (xi, yi) = (x.floor(), y.floor());
+    let (fx, fy) = (x - xi, y - yi);
+    let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
+    let (xi, yi) = (xi as i64, yi as i64);
+    let a = hash(seed, xi, yi);
+    let b = hash(seed, xi + 1, yi);
+    let c = hash(seed, xi, yi + 1);
+    let d = hash(seed, xi + 1, yi + 1);
+    a + (b - a) * sx + (c - a) * sy + (a - b - c + d) * sx * sy
+}
+
+/// Procedural texture with a wide dynamic range: relative radiance in about `[0.05, 1.5]`.
+pub fn texture(seed: u64, x: f64, y: f64) -> f64 {
+    let mut v = 0.0;
+    let mut amp = 0.5;
+    let mut f = 0.7;
+    for o in 0..4 {
+        v += amp * value_noise(seed.wrapping_add(o), x * f, y * f);
+        amp *= 0.5;
+        f *= 2.3;
+    }
+    // v in ~[0, 0.94]; sharpen into patches of very different brightness
+    let patch = value_noise(seed.wrapping_add(99), x * 0.25, y * 0.25);
+    let base = (4.0 * (v - 0.47)).exp() * (0.35 + 1.3 * patch * patch);
+    base.clamp(0.03, 3.0) * 0.5
+}
+
+/// An axis-aligned room around a path, textured on every face.
+#[derive(Clone, Copy, Debug)]
+pub struct Room {
+    /// Lower corner.
+    pub min: Vec3,
+    /// Upper corner.
+    pub max: Vec3,
+    /// Texture seed.
+    pub seed: u64,
+}
+
+impl Room {
+    /// A room enclosing `path` with `margin` on every side.
+    pub fn around(path: &Path, margin: f64, seed: u64) -> Room {
+        let mut min = [f64::INFINITY; 3];
+        let mut max = [f64::NEG_INFINITY; 3];
+        for p in &path.positions {
+            for k in 0..3 {
+                min[k] = min[k].min(p[k]);
+                max[k] = max[k].max(p[k]);
+            }
+        }
+        Room {
+            min: [min[0] - margin, min[1] - margin, min[2] - margin * 0.4],
+            max: [max[0] + margin, max[1] + margin, max[2] + margin * 0.6],
+            seed,
+        }
+    }
+
+    /// Radiance seen from `origin` along `dir` (inside the room).
+    pub fn radiance(&self, origin: Vec3, dir: Vec3) -> f64 {
+        let mut best = f64::INFINITY;
+        let mut axis = 0;
+        for k in 0..3 {
+            if dir[k].abs() < 1e-12 {
+                continue;
+            }
+            let bound = if dir[k] > 0.0 {
+                self.max[k]
+            } else {
+                self.min[k]
+            };
+            let t = (bound - origin[k]) / dir[k];
+            if t > 0.0 && t < best {
+                best = t;
+                axis = k;
+            }
+        }
+        if !best.is_finite() {
+            return 0.1;
+        }
+        let hit = [
+            origin[0] + best * dir[0],
+            origin[1] + best * dir[1],
+            origin[2] + best * dir[2],
+        ];
+        let (a, b) = match axis {
+            0 => (hit[1], hit[2]),
+            1 => (hit[0], hit[2]),
+            _ => (hit[0], hit[1]),
+        };
+        let face = (axis * 2 + usize::from(dir[axis] > 0.0)) as u64;
+        texture(self.seed.wrapping_add(face * 1000), a * 1.3, b * 1.3)
+    }
+}
+
+/// Settings of a synthetic benchmark sequence.
+#[derive(Clone, Copy, Debug)]
+pub struct SequenceConfig {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Number of frames.
+    pub frames: usize,
+    /// Frame rate.
+    pub fps: f64,
+    /// Sensor noise.
+    pub sensor: Sensor,
+}
+
+impl Default for SequenceConfig {
+    fn default() -> Self {
+        SequenceConfig {
+            width: 640,
+            height: 512,
+            frames: 300,
+            fps: 25.0,
+            sensor: Sensor::default(),
+        }
+    }
+}
+
+/// A synthetic benchmark sequence: everything but the encoded images, which are rendered on
+/// demand by [`SyntheticSequence::render`].
+#[derive(Clone, Debug)]
+pub struct SyntheticSequence {
+    /// Settings.
+    pub config: SequenceConfig,
+    /// The camera.
+    pub camera: FovCamera,
+    /// Ground-truth path (length about 100).
+    pub path: Path,
+    /// The room.
+    pub room: Room,
+    /// Exposure per frame in ms.
+    pub exposures_ms: Vec<f64>,
+    /// Ground-truth inverse response.
+    pub response: [f64; 256],
+    /// Ground-truth vignette (row-major, max 1).
+    pub vignette: Vec<f32>,
+    seed: u64,
+}
+
+/// Energy scale: `U`-units per (ms x radiance).
+const GAIN: f64 = 30.0;
+
+impl SyntheticSequence {
+    /// Builds the sequence's truth from a seed.
+    pub fn new(seed: u64, config: SequenceConfig) -> SyntheticSequence {
+        let path = benchmark_path(
+            seed,
+            &PathConfig {
+                frames: config.frames,
+                fps: config.fps,
+                ..PathConfig::default()
+            },
+        );
+        let room = Room::around(&path, 8.0, seed);
+        let mut rng = Rng::derive(seed, 5);
+        let phase = rng.range(0.0, std::f64::consts::TAU);
+        let exposures_ms = (0..config.frames)
+            .map(|i| {
+                let u = i as f64 / config.frames.max(1) as f64;
+                // auto exposure wandering between about 2 and 14 ms
+                (5.3 + 0.9 * (std::f64::consts::TAU * 3.0 * u + phase).sin()
+                    + 0.3 * (std::f64::consts::TAU * 11.0 * u).sin())
+                .exp()
+                    / 30.0
+            })
+            .collect();
+        SyntheticSequence {
+            camera: FovCamera::dataset(config.width, config.height),
+            path,
+            room,
+            exposures_ms,
+            response: ground_truth_response(),
+            vignette: ground_truth_vignette(config.width, config.height, seed),
+            config,
+            seed,
+        }
+    }
+
+    /// Renders frame `i` as 8-bit grey, row-major.
+    pub fn render(&self, i: usize) -> Vec<u8> {
+        let (w, h) = (self.config.width, self.config.height);
+        let r: Mat3 = self.path.rotations[i];
+        let origin = self.path.positions[i];
+        let t = self.exposures_ms[i];
+        let mut out = vec![0u8; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            let mut rng = Rng::derive(self.seed ^ (i as u64) << 20, y as u64);
+            for (x, px) in row.iter_mut().enumerate() {
+                let rad = match self.camera.unproject(x as f64, y as f64) {
+                    Some(ray) => self.room.radiance(origin, mat_vec(&r, ray)),
+                    None => 0.0,
+                };
+                let energy = GAIN * t * self.vignette[y * w + x] as f64 * rad;
+                *px = self.config.sensor.observe(&self.response, energy, &mut rng);
+            }
+        });
+        out
+    }
+
+    /// times.txt rows: `(id, timestamp, exposure_ms)`.
+    pub fn times(&self) -> Vec<(String, f64, f64)> {
+        (0..self.config.frames)
+            .map(|i| (format!("{i:05}"), self.path.times[i], self.exposures_ms[i]))
+            .collect()
+    }
+}
+
+/// An exposure sweep of a static scene (paper section 2.3.1): one irradiance image `B'` (the
+/// vignette absorbed into it) seen at exposures in multiplicative steps.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// `B'` in `U`-units per ms.
+    pub irradiance: Vec<f64>,
+    /// Exposure per frame in ms.
+    pub exposures_ms: Vec<f64>,
+    /// Ground-truth inverse response.
+    pub response: [f64; 256],
+    /// Sensor noise.
+    pub sensor: Sensor,
+    seed: u64,
+}
+
+impl Sweep {
+    /// A sweep of `frames` exposures from `t0` ms in steps of `factor`, of a textured wall
+    /// seen through the vignetted camera.
+    pub fn new(
+        seed: u64,
+        width: usize,
+        height: usize,
+        frames: usize,
+        t0: f64,
+        factor: f64,
+    ) -> Sweep {
+        let cam = FovCamera::dataset(width, height);
+        let vig = ground_truth_vignette(width, height, seed);
+        let room = Room {
+            min: [-6.0, -6.0, -4.0],
+            max: [6.0, 6.0, 4.0],
+            seed,
+        };
+        let r = crate::trajectory::camera_rotation(0.4, 0.1);
+        let mut irradiance = vec![0.0; width * height];
+        irradiance
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, b) in row.iter_mut().enumerate() {
+                    let rad = cam
+                        .unproject(x as f64, y as f64)
+                        .map_or(0.0, |ray| room.radiance([0.5, -0.3, 0.2], mat_vec(&r, ray)));
+                    *b = GAIN * vig[y * width + x] as f64 * rad;
+                }
+            });
+        let exposures_ms = (0..frames).map(|i| t0 * factor.powi(i as i32)).collect();
+        Sweep {
+            width,
+            height,
+            irradiance,
+            exposures_ms,
+            response: ground_truth_response(),
+            sensor: Sensor::default(),
+            seed,
+        }
+    }
+
+    /// Frame `i` as 8-bit grey.
+    pub fn render(&self, i: usize) -> Vec<u8> {
+        let t = self.exposures_ms[i];
+        let mut out = vec![0u8; self.width * self.height];
+        out.par_chunks_mut(self.width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                let mut rng = Rng::derive(self.seed ^ 0xABCD ^ (i as u64) << 20, y as u64);
+                for (x, px) in row.iter_mut().enumerate() {
+                    let e = t * self.irradiance[y * self.width + x];
+                    *px = self.sensor.observe(&self.response, e, &mut rng);
+                }
+            });
+        out
+    }
+}
