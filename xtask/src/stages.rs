@@ -44,6 +44,7 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
     let mut figures = Vec::new();
     figures.extend(camera(quick)?);
     figures.extend(eval(quick)?);
+    figures.extend(rectify(quick)?);
     Ok(figures)
 }
 
@@ -188,5 +189,121 @@ fn eval(quick: bool) -> Result<Vec<Figure>> {
             "ms",
         ),
         Figure::lower("eval.batch_peak_rss_mb", peak_rss_mb(), "MB"),
+    ])
+}
+
+/// Frames per second of `f` over `frames` frames on a pool of `threads` threads.
+fn fps_with_threads(threads: usize, frames: usize, f: impl Fn(usize) + Sync) -> Result<f64> {
+    use rayon::prelude::*;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let t0 = Instant::now();
+    pool.install(|| (0..frames).into_par_iter().for_each(&f));
+    Ok(frames as f64 / t0.elapsed().as_secs_f64())
+}
+
+/// Rectification stage on a synthetic 1280x1024 JPEG (q90) sequence to 640x480: decoding
+/// alone, decoding + rectification + photometric correction (writing excluded), and PNG
+/// encoding, with one and two threads; and the correction's accuracy on noise-free frames.
+fn rectify(quick: bool) -> Result<Vec<Figure>> {
+    use photometric::{Correction, InverseResponse, Vignette};
+    use synthetic::scene::{SequenceConfig, SyntheticSequence};
+    println!("stage rectify: 1280x1024 JPEG q90 -> 640x480 pinhole");
+    let n_unique = if quick { 8 } else { 24 };
+    let seq = SyntheticSequence::new(
+        2,
+        SequenceConfig {
+            width: 1280,
+            height: 1024,
+            frames: n_unique.max(8),
+            ..SequenceConfig::default()
+        },
+    );
+    let jpegs: Vec<Vec<u8>> = (0..n_unique)
+        .map(|i| dataset_io::encode_jpeg_gray(1280, 1024, &seq.render(i), 90))
+        .collect::<Result<_, _>>()?;
+    let cam = CameraFile::parse(&seq.camera.camera_txt((640, 480)))?;
+    let map = RectifyMap::for_mode(
+        &cam.input,
+        cam.input_size,
+        &OutputMode::Crop,
+        ImageSize::new(640, 480),
+    )?;
+    let resp = InverseResponse::new(seq.response)?;
+    let vig = Vignette::from_values(Image::new(1280, 1024, seq.vignette.clone())?)?;
+    let fast = photometric::QuantizedCorrection::new(&resp, &vig, map.clone(), 100.0, 16)?;
+    let frames = if quick { 48 } else { 240 };
+    let decode = |i: usize| {
+        let _ = dataset_io::decode_gray8(&jpegs[i % jpegs.len()]);
+    };
+    let full = |i: usize| {
+        if let Ok(img) = dataset_io::decode_gray8(&jpegs[i % jpegs.len()]) {
+            let mut out = Image::filled(640, 480, 0u16);
+            let _ = fast.apply(&img, Some(seq.exposures_ms[i % jpegs.len()]), &mut out);
+        }
+    };
+    let geometric = |i: usize| {
+        if let Ok(img) = dataset_io::decode_gray8(&jpegs[i % jpegs.len()]) {
+            let _ = map.remap_u8(&img);
+        }
+    };
+    let small = map.remap_u8(&dataset_io::decode_gray8(&jpegs[0]).map_err(anyhow::Error::msg)?)?;
+    let png_ms = median_ms(if quick { 10 } else { 50 }, || {
+        let _ = dataset_io::encode_png_u8(640, 480, 1, small.data(), dataset_io::PngSpeed::Fast);
+    });
+    let dec1 = fps_with_threads(1, frames, decode)?;
+    let dec2 = fps_with_threads(2, frames, decode)?;
+    let geo1 = fps_with_threads(1, frames, geometric)?;
+    let full1 = fps_with_threads(1, frames, full)?;
+    let full2 = fps_with_threads(2, frames, full)?;
+    println!(
+        "  decode {dec1:.0}/{dec2:.0} fps (1/2 threads), +rectify {geo1:.0} fps, +rectify+photometric {full1:.0}/{full2:.0} fps, PNG {png_ms:.2} ms"
+    );
+    // accuracy of the correction on a noise-free frame: U(I)/(tV) against the true radiance
+    let b_true = 12.0f64;
+    let t = 4.0;
+    let frame = Image::from_fn(1280, 1024, |x, y| {
+        synthetic::camera::response_value(
+            &seq.response,
+            t * seq.vignette[y * 1280 + x] as f64 * b_true,
+        )
+        .round() as u8
+    });
+    let raw = Correction::new(&resp, Some(&vig), None, (1280, 1024), false)?;
+    let got = raw.correct(&frame, Some(t))?;
+    let rel = got
+        .data()
+        .iter()
+        .map(|v| ((*v as f64 - b_true) / b_true).abs())
+        .fold(0.0, f64::max);
+    Ok(vec![
+        Figure::lower("rectify.decode_ms_1thread", 1e3 / dec1, "ms"),
+        Figure {
+            key: "rectify.decode_fps_2threads".into(),
+            value: dec2,
+            unit: "fps",
+            lower_is_better: false,
+        },
+        Figure {
+            key: "rectify.full_over_decode_ratio_1thread".into(),
+            value: full1 / dec1,
+            unit: "",
+            lower_is_better: false,
+        },
+        Figure {
+            key: "rectify.geometric_over_decode_ratio_1thread".into(),
+            value: geo1 / dec1,
+            unit: "",
+            lower_is_better: false,
+        },
+        Figure {
+            key: "rectify.full_fps_2threads".into(),
+            value: full2,
+            unit: "fps",
+            lower_is_better: false,
+        },
+        Figure::lower("rectify.png_encode_over_decode", png_ms / (1e3 / dec1), ""),
+        Figure::lower("rectify.correction_max_rel_error", rel, ""),
     ])
 }

@@ -519,6 +519,48 @@ impl RectifyMap {
         Ok(())
     }
 
+    /// Fused bilinear remap for photometric correction at 8-bit speed: each source value is
+    /// looked up in a 16-bit table `lut`, interpolated with the 8-bit fixed-point weights, and
+    /// multiplied by the per-output-pixel `gain` (which includes the 1/256 of the weights) and
+    /// by `factor`; the result is rounded and clamped to `0..=max`. Invalid pixels are 0.
+    #[allow(clippy::too_many_arguments)]
+    pub fn remap_lut_gain_into<T: Copy + Default + TryFrom<u32>>(
+        &self,
+        src: &Image<u8>,
+        lut: &[u16; 256],
+        gain: &[f32],
+        factor: f32,
+        max: u32,
+        dst: &mut Image<T>,
+    ) -> Result<(), CameraError> {
+        self.check_input(src)?;
+        self.check_output(dst)?;
+        if gain.len() != self.fixed.len() {
+            return Err(CameraError::BufferLength {
+                width: self.output.width,
+                height: self.output.height,
+                len: gain.len(),
+            });
+        }
+        let s = src.data();
+        let w = self.input.width;
+        let maxf = max as f32;
+        for ((o, e), &g) in dst.data_mut().iter_mut().zip(&self.fixed).zip(gain) {
+            let i = e.index as usize;
+            if i + w + 1 >= s.len() {
+                *o = T::default();
+                continue;
+            }
+            let v = lut[s[i] as usize] as u32 * e.w[0] as u32
+                + lut[s[i + 1] as usize] as u32 * e.w[1] as u32
+                + lut[s[i + w] as usize] as u32 * e.w[2] as u32
+                + lut[s[i + w + 1] as usize] as u32 * e.w[3] as u32;
+            let q = (v as f32 * (g * factor) + 0.5).min(maxf) as u32;
+            *o = T::try_from(q).unwrap_or_default();
+        }
+        Ok(())
+    }
+
     /// Bilinear remap of an 8-bit image straight to float, with a per-value lookup table
     /// applied to the four source pixels before interpolation (for example the inverse
     /// response). Invalid pixels are NaN.

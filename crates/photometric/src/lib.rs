@@ -32,7 +32,7 @@ mod error;
 mod response;
 mod vignette;
 
-pub use correct::{quantize_u16, quantize_u8, Correction};
+pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
 pub use response::InverseResponse;
 pub use vignette::Vignette;

@@ -6,7 +6,9 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use camera_model::{CameraFile, Image, ImageSize, OutputMode, RectifyMap};
 use dataset_io::{PngSpeed, Sequence, SequenceWriter, TimeRow};
-use photometric::{quantize_u16, quantize_u8, Correction, InverseResponse, Vignette};
+use photometric::{
+    quantize_u16, quantize_u8, Correction, InverseResponse, QuantizedCorrection, Vignette,
+};
 
 use crate::progress;
 
@@ -107,7 +109,10 @@ pub fn parse_range(s: &str, len: usize) -> Result<std::ops::Range<usize>> {
 
 enum Pixels {
     Geometric(RectifyMap),
+    /// The general float path (needed for saturation masking).
     Photometric(Box<Correction>, f32),
+    /// The fused one-pass path.
+    Fast(Box<QuantizedCorrection>, f32),
 }
 
 /// Runs `monovo rectify`.
@@ -194,7 +199,20 @@ pub fn run(args: &Args) -> Result<()> {
         };
         let max_value = resp.values()[255] as f32 / (vig.min_positive() * t_min as f32);
         let scale = args.scale.unwrap_or(max16 / max_value);
-        Pixels::Photometric(Box::new(corr), scale)
+        if args.mask_saturated {
+            Pixels::Photometric(Box::new(corr), scale)
+        } else {
+            Pixels::Fast(
+                Box::new(QuantizedCorrection::new(
+                    resp,
+                    vig,
+                    map.clone(),
+                    scale,
+                    args.depth,
+                )?),
+                scale,
+            )
+        }
     } else {
         Pixels::Geometric(map.clone())
     };
@@ -255,6 +273,18 @@ pub fn run(args: &Args) -> Result<()> {
                         dataset_io::encode_png_u8(w, h, 1, out.data(), PngSpeed::Fast)?
                     }
                 }
+                Pixels::Fast(c, _) => {
+                    let exposure = if irradiance { frame.exposure_ms } else { None };
+                    if depth == 16 {
+                        let mut out = Image::filled(w, h, 0u16);
+                        c.apply(&frame.image, exposure, &mut out)?;
+                        dataset_io::encode_png_u16(w, h, out.data(), PngSpeed::Fast)?
+                    } else {
+                        let mut out = Image::filled(w, h, 0u8);
+                        c.apply(&frame.image, exposure, &mut out)?;
+                        dataset_io::encode_png_u8(w, h, 1, out.data(), PngSpeed::Fast)?
+                    }
+                }
                 Pixels::Photometric(c, scale) => {
                     let mut out = Image::filled(w, h, 0f32);
                     let exposure = if irradiance { frame.exposure_ms } else { None };
@@ -309,7 +339,7 @@ pub fn run(args: &Args) -> Result<()> {
     let dir = writer.finish()?;
     let secs = started.elapsed().as_secs_f64();
     let scale = match &pixels {
-        Pixels::Photometric(_, s) => Some(*s),
+        Pixels::Photometric(_, s) | Pixels::Fast(_, s) => Some(*s),
         Pixels::Geometric(_) => None,
     };
     if args.json {
