@@ -29,6 +29,8 @@ enum Command {
     Info(cmd::info::Args),
     /// Rectify a sequence to a pinhole camera (and undo response and vignetting) as a new sequence.
     Rectify(cmd::rectify::Args),
+    /// Calibrate the response (and the vignette) of your own camera.
+    Calib(cmd::calib::Args),
     /// Score one trajectory with the paper's loop-closure drift metrics.
     Eval(cmd::eval::Args),
     /// Score every run of a results tree in parallel into results.csv.
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Camera(args) => cmd::camera::run(&args),
         Command::Info(args) => cmd::info::run(&args),
         Command::Rectify(args) => cmd::rectify::run(&args),
+        Command::Calib(args) => cmd::calib::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),

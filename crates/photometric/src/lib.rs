@@ -30,9 +30,11 @@
 mod correct;
 mod error;
 mod response;
+mod response_calib;
 mod vignette;
 
 pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
 pub use response::InverseResponse;
+pub use response_calib::{calibrate_response, ResponseCalibration, ResponseOptions};
 pub use vignette::Vignette;

@@ -3,3 +3,4 @@
 
 mod correct;
 mod files;
+mod response;

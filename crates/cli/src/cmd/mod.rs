@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod calib;
 pub mod camera;
 pub mod eval;
 pub mod eval_batch;
