@@ -23,6 +23,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run the whole benchmark end to end on synthetic data with known truth (start here).
+    Demo(cmd::demo::Args),
     /// Show a camera.txt: the input model and the output pinhole camera it rectifies to.
     Camera(cmd::camera::Args),
     /// What a sequence folder holds: frames, timing, exposures, camera, calibration, ground truth.
@@ -44,6 +46,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => cmd::demo::run(&args),
         Command::Camera(args) => cmd::camera::run(&args),
         Command::Info(args) => cmd::info::run(&args),
         Command::Rectify(args) => cmd::rectify::run(&args),

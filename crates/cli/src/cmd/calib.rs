@@ -115,48 +115,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     pb.finish_and_clear();
     dataset_io::write_atomic(&a.output, cal.response.to_text().as_bytes())?;
     if let Some(p) = &a.plot {
-        let u = cal.response.values();
-        let mut c1 = Chart::new(
-            "inverse response U",
-            "grey value I",
-            "U(I) (scaled to U(255)=255)",
-        );
-        c1.legend = Some(Corner::TopLeft);
-        c1.x_range = Some([0.0, 255.0]);
-        c1.series.push(Series::line(
-            "U",
-            (0..256).map(|k| [k as f64, u[k]]).collect(),
-            PALETTE[0],
-        ));
-        c1.series
-            .push(Series::line("linear", vec![[0.0, 0.0], [255.0, 255.0]], PALETTE[7]).dashed());
-        let mut c2 = Chart::new(
-            "observed grey values",
-            "grey value I",
-            "observations (log10)",
-        );
-        c2.legend = None;
-        c2.x_range = Some([0.0, 255.0]);
-        let hist: Vec<[f64; 2]> = cal
-            .histogram
-            .iter()
-            .take(255)
-            .enumerate()
-            .flat_map(|(k, &c)| {
-                let v = (c as f64).max(1.0).log10();
-                [[k as f64, v], [k as f64 + 1.0, v]]
-            })
-            .collect();
-        c2.series.push(Series::line("", hist, PALETTE[1]));
-        let fig = Figure {
-            width: 1200,
-            height: 500,
-            panels: vec![
-                (Panel::Chart(c1), [0.0, 0.0, 0.5, 1.0]),
-                (Panel::Chart(c2), [0.5, 0.0, 0.5, 1.0]),
-            ],
-        };
-        plot::save(&fig, p)?;
+        response_figure(&cal, None, p)?;
     }
     if a.json {
         println!(
@@ -197,6 +156,66 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         println!("wrote {}", a.output.display());
     }
     Ok(())
+}
+
+/// Plots U (and the truth, when known) beside the histogram of observed grey values.
+pub fn response_figure(
+    cal: &photometric::ResponseCalibration,
+    truth: Option<&[f64; 256]>,
+    path: &std::path::Path,
+) -> Result<()> {
+    let u = cal.response.values();
+    let mut c1 = Chart::new(
+        "inverse response U",
+        "grey value I",
+        "U(I) (scaled to U(255)=255)",
+    );
+    c1.legend = Some(Corner::TopLeft);
+    c1.x_range = Some([0.0, 255.0]);
+    c1.series.push(Series::line(
+        "U estimated",
+        (0..256).map(|k| [k as f64, u[k]]).collect(),
+        PALETTE[0],
+    ));
+    if let Some(t) = truth {
+        c1.series.push(
+            Series::line(
+                "U true",
+                (0..256).map(|k| [k as f64, t[k]]).collect(),
+                PALETTE[2],
+            )
+            .dashed(),
+        );
+    }
+    c1.series
+        .push(Series::line("linear", vec![[0.0, 0.0], [255.0, 255.0]], PALETTE[7]).dashed());
+    let mut c2 = Chart::new(
+        "observed grey values",
+        "grey value I",
+        "observations (log10)",
+    );
+    c2.legend = None;
+    c2.x_range = Some([0.0, 255.0]);
+    let hist: Vec<[f64; 2]> = cal
+        .histogram
+        .iter()
+        .take(255)
+        .enumerate()
+        .flat_map(|(k, &c)| {
+            let v = (c as f64).max(1.0).log10();
+            [[k as f64, v], [k as f64 + 1.0, v]]
+        })
+        .collect();
+    c2.series.push(Series::line("", hist, PALETTE[1]));
+    let fig = Figure {
+        width: 1200,
+        height: 500,
+        panels: vec![
+            (Panel::Chart(c1), [0.0, 0.0, 0.5, 1.0]),
+            (Panel::Chart(c2), [0.5, 0.0, 0.5, 1.0]),
+        ],
+    };
+    plot::save(&fig, path)
 }
 
 /// Runs `monovo calib`.

@@ -2,6 +2,7 @@
 
 pub mod calib;
 pub mod camera;
+pub mod demo;
 pub mod eval;
 pub mod eval_batch;
 pub mod info;
