@@ -46,6 +46,7 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
     figures.extend(eval(quick)?);
     figures.extend(rectify(quick)?);
     figures.extend(response(quick)?);
+    figures.extend(vignette(quick)?);
     Ok(figures)
 }
 
@@ -378,5 +379,157 @@ fn response(quick: bool) -> Result<Vec<Figure>> {
             f64::from(u8::from(!inc)),
             "",
         ),
+    ])
+}
+
+/// In-memory frames of a synthetic plane sequence with their true poses.
+pub struct MemoryPlaneFrames {
+    /// Rendered images.
+    pub images: Vec<Image<u8>>,
+    /// The truth.
+    pub seq: synthetic::plane::PlaneSequence,
+}
+
+impl photometric::PlaneFrames for MemoryPlaneFrames {
+    fn len(&self) -> usize {
+        self.images.len()
+    }
+    fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, photometric::PhotometricError> {
+        let p = self.seq.poses[i];
+        Ok(photometric::PlaneFrame {
+            image: self.images[i].clone(),
+            exposure_ms: self.seq.exposures_ms[i],
+            pose: photometric::PlanePose { r: p.r, t: p.t },
+        })
+    }
+}
+
+/// RMS relative error of a vignette against the truth over valid pixels, and the valid fraction.
+pub fn vignette_errors(v: &Image<f32>, truth: &[f32]) -> (f64, f64) {
+    let mut s = 0.0;
+    let mut n = 0usize;
+    for (a, b) in v.data().iter().zip(truth) {
+        if a.is_finite() {
+            let r = (*a as f64 - *b as f64) / *b as f64;
+            s += r * r;
+            n += 1;
+        }
+    }
+    ((s / n.max(1) as f64).sqrt(), n as f64 / truth.len() as f64)
+}
+
+/// Vignette calibration on a synthetic marker-plane sequence with the true poses.
+fn vignette(quick: bool) -> Result<Vec<Figure>> {
+    use synthetic::plane::{PlaneConfig, PlaneSequence};
+    println!("stage vignette: synthetic marker plane, true poses");
+    let (w, h, n) = if quick {
+        (320, 256, 80)
+    } else {
+        (640, 512, 150)
+    };
+    let seq = PlaneSequence::new(
+        5,
+        PlaneConfig {
+            width: w,
+            height: h,
+            frames: n,
+            ..PlaneConfig::default()
+        },
+    );
+    let images: Vec<Image<u8>> = (0..n)
+        .map(|i| Image::new(w, h, seq.render(i)))
+        .collect::<Result<_, _>>()?;
+    let cam = CameraFile::parse(&seq.camera.camera_txt((w, h)))?;
+    let resp = photometric::InverseResponse::new(seq.response)?;
+    let truth = seq.vignette.clone();
+    let src = MemoryPlaneFrames { images, seq };
+    reset_peak_rss();
+    let t0 = Instant::now();
+    let cal = photometric::calibrate_vignette(
+        &cam.input,
+        ImageSize::new(w, h),
+        &resp,
+        &src,
+        &photometric::VignetteOptions::default(),
+        &|_, _| {},
+    )?;
+    let secs = t0.elapsed().as_secs_f64();
+    let mem = peak_rss_mb();
+    let (rms, valid) = vignette_errors(&cal.vignette, &truth);
+    let (srms, _) = vignette_errors(&cal.smoothed, &truth);
+    println!(
+        "  {w}x{h} x {n}, true poses: rms {:.3}% (smoothed {:.3}%), valid {:.1}%, {} iterations, {secs:.1} s, {mem:.0} MB",
+        rms * 100.0,
+        srms * 100.0,
+        valid * 100.0,
+        cal.iterations
+    );
+    // the same with poses from detected markers
+    let map = RectifyMap::for_mode(
+        &cam.input,
+        cam.input_size,
+        &OutputMode::Full,
+        cam.input_size,
+    )?;
+    let k = map.camera();
+    let mut detected = src;
+    let mut keep = Vec::new();
+    for i in 0..n {
+        let rect = map.remap_u8(&detected.images[i])?;
+        let det: Vec<_> = photometric::marker::detect_markers(&rect)
+            .into_iter()
+            .filter(|d| d.id == 213)
+            .collect();
+        let pose = det
+            .first()
+            .and_then(|d| photometric::marker::marker_pose(&k, &d.corners));
+        if let (1, Some(p)) = (det.len(), pose) {
+            detected.seq.poses[i] = synthetic::plane::PlanePose { r: p.r, t: p.t };
+            keep.push(i);
+        }
+    }
+    // frames without a detection are skipped, as `monovo calib vignette` does
+    let found = keep.len();
+    detected.images = keep.iter().map(|&i| detected.images[i].clone()).collect();
+    detected.seq.poses = keep.iter().map(|&i| detected.seq.poses[i]).collect();
+    detected.seq.exposures_ms = keep.iter().map(|&i| detected.seq.exposures_ms[i]).collect();
+    let cal_d = photometric::calibrate_vignette(
+        &cam.input,
+        ImageSize::new(w, h),
+        &resp,
+        &detected,
+        &photometric::VignetteOptions::default(),
+        &|_, _| {},
+    )?;
+    let (drms, dvalid) = vignette_errors(&cal_d.vignette, &truth);
+    println!(
+        "  detected markers: rms {:.3}%, valid {:.1}%",
+        drms * 100.0,
+        dvalid * 100.0
+    );
+    Ok(vec![
+        Figure::lower("vignette.rms_relative_error", rms, ""),
+        Figure::lower("vignette.smoothed_rms_relative_error", srms, ""),
+        Figure {
+            key: "vignette.valid_fraction".into(),
+            value: valid,
+            unit: "",
+            lower_is_better: false,
+        },
+        Figure::lower("vignette.detected_rms_relative_error", drms, ""),
+        Figure {
+            key: "vignette.detected_frame_fraction".into(),
+            value: found as f64 / n as f64,
+            unit: "",
+            lower_is_better: false,
+        },
+        Figure {
+            key: "vignette.detected_valid_fraction".into(),
+            value: dvalid,
+            unit: "",
+            lower_is_better: false,
+        },
+        Figure::lower("vignette.seconds", secs, "s"),
+        Figure::lower("vignette.peak_rss_mb", mem, "MB"),
     ])
 }

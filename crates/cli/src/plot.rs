@@ -67,7 +67,6 @@ impl Series {
 }
 
 /// Where the legend goes inside the plot area.
-#[allow(dead_code)] // every corner is part of the plotting API; not every one is used yet
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Corner {
     /// Top left.
@@ -140,7 +139,6 @@ pub struct Heatmap {
 }
 
 /// A panel of a figure.
-#[allow(dead_code)] // heat maps serve the calibration plots
 #[derive(Clone, Debug)]
 pub enum Panel {
     /// Lines.

@@ -92,3 +92,126 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
     );
     assert!(!out.exists());
 }
+
+fn write_png16_reader(p: &std::path::Path) -> Vec<f32> {
+    let (img, _) = dataset_io::read_gray16(p).unwrap();
+    let max = *img.data().iter().max().unwrap() as f32;
+    img.data().iter().map(|v| *v as f32 / max).collect()
+}
+
+#[test]
+fn vignette_calibration_with_markers_and_with_poses() {
+    let d = temp_dir("calib_vignette");
+    let set = d.join("wall");
+    let o = monovo(&[
+        "synth",
+        "vignette",
+        "-o",
+        set.to_str().unwrap(),
+        "--size",
+        "320x256",
+        "--frames",
+        "60",
+        "--png",
+        "--seed",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let truth = write_png16_reader(&set.join("truth_vignette.png"));
+    for (name, extra) in [
+        ("detected", Vec::<String>::new()),
+        (
+            "poses",
+            vec![
+                "--poses".to_string(),
+                set.join("poses.txt").to_str().unwrap().to_string(),
+            ],
+        ),
+    ] {
+        let out = d.join(format!("{name}.png"));
+        let plot = d.join(format!("{name}_plot.png"));
+        let mut args = vec![
+            "calib".to_string(),
+            "vignette".into(),
+            set.to_str().unwrap().into(),
+            "-o".into(),
+            out.to_str().unwrap().into(),
+            "--json".into(),
+            "--plot".into(),
+            plot.to_str().unwrap().into(),
+        ];
+        args.extend(extra);
+        let a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let o = monovo(&a);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert!(v["frames_used"].as_u64().unwrap() >= 55, "{v}");
+        assert!(v["coverage"].as_f64().unwrap() >= 0.98, "{v}");
+        // the written 16-bit map against the truth, over its valid pixels: tolerance 1% here
+        // (60 frames of 320x256; bench-synthetic checks 0.5% on 150 frames of 640x512)
+        let got = write_png16_reader(&out);
+        let (mut s, mut n) = (0.0, 0);
+        for (a, b) in got.iter().zip(&truth) {
+            if *a > 0.0 {
+                s += ((a - b) / b).powi(2) as f64;
+                n += 1;
+            }
+        }
+        let rms = (s / n as f64).sqrt();
+        assert!(rms < 0.01, "{name}: rms relative error {rms}");
+        assert!(d.join(format!("{name}_smooth.png")).exists());
+        assert!(std::fs::metadata(&plot).unwrap().len() > 5000);
+    }
+}
+
+#[test]
+fn vignette_bad_inputs_fail_clearly_without_output() {
+    let d = temp_dir("calib_vignette_bad");
+    let set = d.join("wall");
+    let o = monovo(&[
+        "synth",
+        "vignette",
+        "-o",
+        set.to_str().unwrap(),
+        "--size",
+        "160x128",
+        "--frames",
+        "4",
+        "--png",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = d.join("v.png");
+    let run = |extra: &[&str]| {
+        let mut a = vec![
+            "calib",
+            "vignette",
+            set.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        let o = monovo(&a);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(!out.exists(), "no output after a failure");
+        stderr(&o)
+    };
+    let e = run(&["--marker-id", "7"]);
+    assert!(e.contains("marker id 7") && e.contains("not found"), "{e}");
+    std::fs::rename(set.join("pcalib.txt"), d.join("pcalib.txt")).unwrap();
+    let e = run(&[]);
+    assert!(e.contains("pcalib"), "{e}");
+    std::fs::rename(d.join("pcalib.txt"), set.join("pcalib.txt")).unwrap();
+    let cam = std::fs::read_to_string(set.join("camera.txt")).unwrap();
+    std::fs::write(set.join("camera.txt"), cam.replace("\nfull\n", "\nnone\n")).unwrap();
+    let e = run(&[]);
+    assert!(e.contains("camera.txt") && e.contains("none"), "{e}");
+    std::fs::write(set.join("camera.txt"), cam).unwrap();
+    let t = std::fs::read_to_string(set.join("times.txt")).unwrap();
+    let two: String = t
+        .lines()
+        .map(|l| l.split_whitespace().take(2).collect::<Vec<_>>().join(" ") + "\n")
+        .collect();
+    std::fs::write(set.join("times.txt"), two).unwrap();
+    let e = run(&[]);
+    assert!(e.contains("times.txt") && e.contains("exposure"), "{e}");
+}

@@ -29,12 +29,18 @@
 
 mod correct;
 mod error;
+pub mod marker;
 mod response;
 mod response_calib;
 mod vignette;
+mod vignette_calib;
 
 pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
 pub use response::InverseResponse;
 pub use response_calib::{calibrate_response, ResponseCalibration, ResponseOptions};
 pub use vignette::Vignette;
+pub use vignette_calib::{
+    calibrate_vignette, smooth_masked, PlaneFrame, PlaneFrames, PlanePose, VignetteCalibration,
+    VignetteOptions,
+};

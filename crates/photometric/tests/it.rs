@@ -3,4 +3,5 @@
 
 mod correct;
 mod files;
+mod marker;
 mod response;

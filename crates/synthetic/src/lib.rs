@@ -1,7 +1,7 @@
 //! Synthetic data with known ground truth for every monovo stage, always from a fixed seed:
 //! benchmark-like camera paths and drifted VO estimates ([`trajectory`]), whole synthetic
 //! benchmark results of several methods ([`results`]), the ground-truth camera, response,
-//! vignette and sensor ([`camera`]), rendered sequences and exposure sweeps ([`scene`]), and a
+//! vignette and sensor ([`camera`]), marker-plane vignette data ([`plane`]), rendered sequences and exposure sweeps ([`scene`]), and a
 //! seedable
 //! random number generator ([`Rng`]) that gives the same data on every platform.
 //!
@@ -23,6 +23,7 @@
 #![deny(missing_docs)]
 
 pub mod camera;
+pub mod plane;
 pub mod results;
 mod rng;
 pub mod scene;

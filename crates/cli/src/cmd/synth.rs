@@ -37,6 +37,85 @@ loses tracking more often, writes keyframes only and uses the 2e9 - t timestamps
     /// A response-calibration sweep: a static scene at exposures in steps of 1.05 (images.zip,
     /// times.txt with exposures, camera.txt), and the true pcalib.txt as truth_pcalib.txt.
     Sweep(SweepArgs),
+    /// A vignette-calibration set: a bright wall with ArUco marker 213 filmed from random poses
+    /// (images.zip, times.txt, camera.txt, pcalib.txt), with the truth as poses.txt and
+    /// truth_vignette.png.
+    Vignette(VignetteArgs),
+}
+
+/// Arguments of `monovo synth vignette`.
+#[derive(clap::Args, Debug)]
+pub struct VignetteArgs {
+    /// Output sequence folder (must not exist unless --force).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Image size.
+    #[arg(long, default_value = "640x512", value_name = "WxH")]
+    pub size: camera_model::ImageSize,
+    /// Number of frames.
+    #[arg(long, default_value_t = 150)]
+    pub frames: usize,
+    /// Store frames as PNG instead of JPEG (quality 95).
+    #[arg(long)]
+    pub png: bool,
+    /// Replace an existing output folder.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Writes a synthetic vignette-calibration set into `out`.
+pub fn write_vignette_set(
+    out: &OutputDir,
+    a: &VignetteArgs,
+) -> Result<synthetic::plane::PlaneSequence> {
+    use synthetic::plane::{PlaneConfig, PlaneSequence};
+    let (w, h) = (a.size.width, a.size.height);
+    let seq = PlaneSequence::new(
+        a.seed,
+        PlaneConfig {
+            width: w,
+            height: h,
+            frames: a.frames.max(1),
+            ..PlaneConfig::default()
+        },
+    );
+    let ext = if a.png { "png" } else { "jpg" };
+    write_frames(&out.file("images.zip")?, seq.poses.len(), ext, |i| {
+        let f = seq.render(i);
+        Ok(if a.png {
+            dataset_io::encode_png_u8(w, h, 1, &f, dataset_io::PngSpeed::Fast)?
+        } else {
+            dataset_io::encode_jpeg_gray(w, h, &f, 95)?
+        })
+    })?;
+    let times: String = seq
+        .exposures_ms
+        .iter()
+        .enumerate()
+        .map(|(i, e)| format!("{i:05} {:.6} {e}\n", 1_400_000_000.0 + i as f64 * 0.1))
+        .collect();
+    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
+    let cam = seq
+        .camera
+        .camera_txt((w, h))
+        .replace("\ncrop\n", "\nfull\n");
+    dataset_io::write_atomic(&out.file("camera.txt")?, cam.as_bytes())?;
+    let resp = photometric::InverseResponse::new(seq.response)?;
+    dataset_io::write_atomic(&out.file("pcalib.txt")?, resp.to_text().as_bytes())?;
+    dataset_io::write_atomic(&out.file("poses.txt")?, seq.poses_text().as_bytes())?;
+    let vig =
+        photometric::Vignette::from_values(camera_model::Image::new(w, h, seq.vignette.clone())?)?;
+    dataset_io::write_png_u16(
+        &out.file("truth_vignette.png")?,
+        w,
+        h,
+        vig.to_u16().data(),
+        dataset_io::PngSpeed::Default,
+    )?;
+    Ok(seq)
 }
 
 /// Arguments of `monovo synth sequence`.
@@ -281,6 +360,18 @@ pub fn run(args: &Args) -> Result<()> {
                 seq.config.width,
                 seq.config.height,
                 seq.config.frames,
+                dir.display()
+            );
+        }
+        What::Vignette(a) => {
+            let out = OutputDir::create(&a.output, a.force)?;
+            let seq = write_vignette_set(&out, a)?;
+            let dir = out.commit()?;
+            println!(
+                "wrote a {}x{} marker-plane set of {} frames to {}",
+                seq.config.width,
+                seq.config.height,
+                seq.poses.len(),
                 dir.display()
             );
         }

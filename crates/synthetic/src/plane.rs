@@ -1,0 +1,250 @@
+//! Vignette-calibration data (paper section 2.3.2): a bright, mildly textured planar wall with
+//! one printed ArUco marker (original dictionary, id 213 by default), filmed from random poses
+//! through the FOV camera with the ground-truth vignette, response, random exposures and
+//! noise. The true poses are available in `monovo calib vignette --poses` format.
+
+use rayon::prelude::*;
+
+use crate::camera::{ground_truth_response, ground_truth_vignette, FovCamera, Sensor};
+use crate::scene::texture;
+use crate::trajectory::{mat_vec, Mat3, Vec3};
+use crate::Rng;
+
+/// The four 5-bit row words of the original ArUco dictionary; a marker's id holds 2 bits per
+/// row (most significant first), selecting the word of that row. Bit 1 = white.
+pub const ARUCO_WORDS: [u8; 4] = [0b10000, 0b10111, 0b01001, 0b01110];
+
+/// The 7x7 cell bitmap of an original-dictionary ArUco marker (`true` = white), with its
+/// black border; row 0 is the top.
+pub fn aruco_bitmap(id: u16) -> [[bool; 7]; 7] {
+    let mut b = [[false; 7]; 7];
+    for y in 0..5 {
+        let word = ARUCO_WORDS[((id >> (2 * (4 - y))) & 3) as usize];
+        for x in 0..5 {
+            b[y + 1][x + 1] = (word >> (4 - x)) & 1 == 1;
+        }
+    }
+    b
+}
+
+/// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanePose {
+    /// Rotation (row-major).
+    pub r: Mat3,
+    /// Translation.
+    pub t: Vec3,
+}
+
+/// Settings of a marker-plane sequence.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneConfig {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Number of frames.
+    pub frames: usize,
+    /// Marker id.
+    pub marker_id: u16,
+    /// Sensor noise.
+    pub sensor: Sensor,
+}
+
+impl Default for PlaneConfig {
+    fn default() -> Self {
+        PlaneConfig {
+            width: 640,
+            height: 512,
+            frames: 150,
+            marker_id: 213,
+            sensor: Sensor::default(),
+        }
+    }
+}
+
+/// A synthetic vignette-calibration sequence with its truth.
+#[derive(Clone, Debug)]
+pub struct PlaneSequence {
+    /// Settings.
+    pub config: PlaneConfig,
+    /// The camera.
+    pub camera: FovCamera,
+    /// Per-frame `camera_from_plane`.
+    pub poses: Vec<PlanePose>,
+    /// Per-frame exposure in ms.
+    pub exposures_ms: Vec<f64>,
+    /// Ground-truth inverse response.
+    pub response: [f64; 256],
+    /// Ground-truth vignette (max 1).
+    pub vignette: Vec<f32>,
+    seed: u64,
+}
+
+fn normalize(v: Vec3) -> Vec3 {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    [v[0] / n, v[1] / n, v[2] / n]
+}
+
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// Energy scale of the plane sequences (`U`-units per ms and radiance).
+const GAIN: f64 = 34.0;
+
+impl PlaneSequence {
+    /// Builds the truth from a seed: poses at 1.3 to 2.4 marker widths from the plane,
+    /// within 40 degrees of its normal, looking near the marker, with random roll.
+    pub fn new(seed: u64, config: PlaneConfig) -> PlaneSequence {
+        let mut rng = Rng::derive(seed, 31);
+        let mut poses = Vec::with_capacity(config.frames);
+        let mut exposures_ms = Vec::with_capacity(config.frames);
+        for _ in 0..config.frames {
+            let tilt = rng.range(0.0, 40f64.to_radians());
+            let az = rng.range(0.0, std::f64::consts::TAU);
+            let d = rng.range(1.3, 2.4);
+            let p = [
+                d * tilt.sin() * az.cos(),
+                d * tilt.sin() * az.sin(),
+                d * tilt.cos(),
+            ];
+            let target = [rng.range(-0.25, 0.25), rng.range(-0.25, 0.25), 0.0];
+            let z = normalize([target[0] - p[0], target[1] - p[1], target[2] - p[2]]);
+            let roll = rng.range(0.0, std::f64::consts::TAU);
+            let helper = if z[0].abs() < 0.9 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 1.0, 0.0]
+            };
+            let x0 = normalize(cross(helper, z));
+            let y0 = cross(z, x0);
+            let (s, c) = roll.sin_cos();
+            let x = [
+                c * x0[0] + s * y0[0],
+                c * x0[1] + s * y0[1],
+                c * x0[2] + s * y0[2],
+            ];
+            let y = cross(z, x);
+            // rows of camera_from_plane are the camera axes in plane coordinates
+            let r = [x, y, z];
+            let t = [-mat_vec(&r, p)[0], -mat_vec(&r, p)[1], -mat_vec(&r, p)[2]];
+            poses.push(PlanePose { r, t });
+            exposures_ms.push(rng.range(2.0, 6.5));
+        }
+        PlaneSequence {
+            camera: FovCamera::dataset(config.width, config.height),
+            poses,
+            exposures_ms,
+            response: ground_truth_response(),
+            vignette: ground_truth_vignette(config.width, config.height, seed ^ 0x5eed),
+            config,
+            seed,
+        }
+    }
+
+    /// Radiance of the plane at `(x, y)` (marker widths; the marker is the unit square
+    /// centred at the origin, corner 0 of its bitmap at (-0.5, 0.5)).
+    pub fn radiance(&self, x: f64, y: f64) -> f64 {
+        if (-0.5..0.5).contains(&x) && (-0.5..0.5).contains(&y) {
+            let col = ((x + 0.5) * 7.0).floor() as usize;
+            let row = ((0.5 - y) * 7.0).floor() as usize;
+            let bm = aruco_bitmap(self.config.marker_id);
+            if bm[row.min(6)][col.min(6)] {
+                0.9
+            } else {
+                0.04
+            }
+        } else {
+            0.78 + 0.12 * (texture(self.seed ^ 0xBEEF, x * 0.6, y * 0.6) - 0.5).clamp(-1.0, 1.0)
+        }
+    }
+
+    /// Renders frame `i` (2x2 supersampled) as 8-bit grey.
+    pub fn render(&self, i: usize) -> Vec<u8> {
+        let (w, h) = (self.config.width, self.config.height);
+        let pose = self.poses[i];
+        let t = self.exposures_ms[i];
+        // plane normal and offset in the camera frame
+        let n = [pose.r[0][2], pose.r[1][2], pose.r[2][2]];
+        let nt = n[0] * pose.t[0] + n[1] * pose.t[1] + n[2] * pose.t[2];
+        let mut out = vec![0u8; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            let mut rng = Rng::derive(self.seed ^ 0x9A9A ^ (i as u64) << 20, y as u64);
+            for (x, px) in row.iter_mut().enumerate() {
+                let mut rad = 0.0;
+                for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+                    rad += 0.25
+                        * match self.camera.unproject(x as f64 + dx, y as f64 + dy) {
+                            Some(ray) => {
+                                let nr = n[0] * ray[0] + n[1] * ray[1] + n[2] * ray[2];
+                                let lam = nt / nr;
+                                if nr.abs() < 1e-12 || lam <= 0.0 {
+                                    0.05
+                                } else {
+                                    let pc = [
+                                        lam * ray[0] - pose.t[0],
+                                        lam * ray[1] - pose.t[1],
+                                        lam * ray[2] - pose.t[2],
+                                    ];
+                                    // plane = R^T (X - t)
+                                    let px = pose.r[0][0] * pc[0]
+                                        + pose.r[1][0] * pc[1]
+                                        + pose.r[2][0] * pc[2];
+                                    let py = pose.r[0][1] * pc[0]
+                                        + pose.r[1][1] * pc[1]
+                                        + pose.r[2][1] * pc[2];
+                                    self.radiance(px, py)
+                                }
+                            }
+                            None => 0.05,
+                        };
+                }
+                let e = GAIN * t * self.vignette[y * w + x] as f64 * rad;
+                *px = self.config.sensor.observe(&self.response, e, &mut rng);
+            }
+        });
+        out
+    }
+
+    /// The true poses in `--poses` format: `id r11 .. r33 tx ty tz` per frame.
+    pub fn poses_text(&self) -> String {
+        let mut s = String::new();
+        for (i, p) in self.poses.iter().enumerate() {
+            let r = p.r;
+            s.push_str(&format!(
+                "{i:05} {} {} {} {} {} {} {} {} {} {} {} {}\n",
+                r[0][0],
+                r[0][1],
+                r[0][2],
+                r[1][0],
+                r[1][1],
+                r[1][2],
+                r[2][0],
+                r[2][1],
+                r[2][2],
+                p.t[0],
+                p.t[1],
+                p.t[2]
+            ));
+        }
+        s
+    }
+
+    /// Pixel positions of the marker's four outline corners in frame `i` (corner 0 = top-left
+    /// of the bitmap, then clockwise), through the true camera.
+    pub fn marker_corners(&self, i: usize) -> [[f64; 2]; 4] {
+        let p = self.poses[i];
+        let pts = [[-0.5, 0.5], [0.5, 0.5], [0.5, -0.5], [-0.5, -0.5]];
+        pts.map(|[x, y]| {
+            let c = mat_vec(&p.r, [x, y, 0.0]);
+            self.camera
+                .project([c[0] + p.t[0], c[1] + p.t[1], c[2] + p.t[2]])
+                .unwrap_or([f64::NAN, f64::NAN])
+        })
+    }
+}
