@@ -301,11 +301,16 @@ fn parse_poses(
     Ok(out)
 }
 
-/// Frames of a sequence with poses, decoded on demand.
+/// Frames of a sequence with poses: decoded once and kept when they fit in
+/// [`DECODED_CACHE_BYTES`], else decoded again on every pass (memory stays flat).
 struct SequencePlaneFrames<'a> {
     seq: &'a Sequence,
     frames: Vec<(usize, f64, photometric::PlanePose)>,
+    decoded: Vec<Image<u8>>,
 }
+
+/// Largest total size of decoded frames kept in memory by `calib vignette`.
+const DECODED_CACHE_BYTES: usize = 192 << 20;
 
 impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
     fn len(&self) -> usize {
@@ -313,10 +318,13 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
     }
     fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, photometric::PhotometricError> {
         let (k, exposure_ms, pose) = self.frames[i];
-        let image = self
-            .seq
-            .decode(k)
-            .map_err(|e| photometric::PhotometricError::Calibration(e.to_string()))?;
+        let image = match self.decoded.get(i) {
+            Some(img) => img.clone(),
+            None => self
+                .seq
+                .decode(k)
+                .map_err(|e| photometric::PhotometricError::Calibration(e.to_string()))?,
+        };
         Ok(photometric::PlaneFrame {
             image,
             exposure_ms,
@@ -480,7 +488,28 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         max_iterations: a.max_iterations.max(1),
         ..photometric::VignetteOptions::default()
     };
-    let source = SequencePlaneFrames { seq: &seq, frames };
+    let bytes = frames.len() * cam.input_size.pixels();
+    let decoded = if bytes <= DECODED_CACHE_BYTES {
+        let idx: Vec<usize> = frames.iter().map(|f| f.0).collect();
+        let mut out = Vec::with_capacity(idx.len());
+        seq.process(
+            &idx,
+            rayon::current_num_threads() * 4,
+            |f| Ok::<_, anyhow::Error>(f.image),
+            |img| {
+                out.push(img);
+                Ok(())
+            },
+        )?;
+        out
+    } else {
+        Vec::new()
+    };
+    let source = SequencePlaneFrames {
+        seq: &seq,
+        frames,
+        decoded,
+    };
     let pb = progress::bar(opts.max_iterations as u64, "iterating");
     let cal = photometric::calibrate_vignette(
         &cam.input,
