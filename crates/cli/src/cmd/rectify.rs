@@ -34,10 +34,10 @@ pub struct Args {
     /// The sequence folder.
     pub sequence: PathBuf,
     /// The new sequence folder.
-    #[arg(short, long, value_name = "OUT")]
+    #[arg(short = 'o', value_name = "OUT")]
     pub output: PathBuf,
     /// Output camera: crop, full, none, or "fx fy cx cy 0" (default: camera.txt line 3).
-    #[arg(long = "output-camera", visible_alias = "camera", value_name = "MODE")]
+    #[arg(long = "output", visible_alias = "output-camera", value_name = "MODE")]
     pub camera: Option<OutputMode>,
     /// Output size WIDTHxHEIGHT (default: camera.txt line 4).
     #[arg(long, value_name = "WxH")]
