@@ -37,9 +37,10 @@ impl Figure {
 }
 
 fn usage() -> &'static str {
-    "usage: cargo xtask bench-synthetic [--quick] [--json FILE]\n\n\
+    "usage: cargo xtask bench-synthetic [--quick] [--only STAGE] [--json FILE]\n\n\
      Runs every stage on synthetic data, prints accuracy, speed and memory, and fails when a\n\
-     figure is worse than xtask/thresholds.json. --quick is the CI variant (smaller data)."
+     figure is worse than xtask/thresholds.json. --quick is the CI variant (smaller data);\n\
+     --only runs one stage: camera, eval, rectify, response or vignette."
 }
 
 fn main() -> ExitCode {
@@ -62,10 +63,12 @@ fn run() -> Result<()> {
         bail!("unknown task `{task}`\n{}", usage());
     }
     let mut quick = false;
+    let mut only: Option<String> = None;
     let mut json: Option<PathBuf> = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--quick" => quick = true,
+            "--only" => only = Some(args.next().context("--only needs a stage name")?),
             "--json" => json = Some(args.next().context("--json needs a file")?.into()),
             "-h" | "--help" => {
                 println!("{}", usage());
@@ -81,7 +84,7 @@ fn run() -> Result<()> {
     )
     .with_context(|| format!("parsing {}", thresholds_path.display()))?;
     let mode = if quick { "quick" } else { "full" };
-    let figures = stages::run_all(quick)?;
+    let figures = stages::run_all(quick, only.as_deref())?;
     println!(
         "\n{:<44} {:>14} {:>14}  status",
         "figure", "value", "threshold"

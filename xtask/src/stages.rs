@@ -40,13 +40,26 @@ pub fn median_ms(n: usize, mut f: impl FnMut()) -> f64 {
 }
 
 /// Runs every stage.
-pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
+pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
+    type Stage = fn(bool) -> Result<Vec<Figure>>;
+    let stages: [(&str, Stage); 5] = [
+        ("camera", camera),
+        ("eval", eval),
+        ("rectify", rectify),
+        ("response", response),
+        ("vignette", vignette),
+    ];
+    if let Some(o) = only {
+        if !stages.iter().any(|(n, _)| *n == o) {
+            anyhow::bail!("unknown stage `{o}`");
+        }
+    }
     let mut figures = Vec::new();
-    figures.extend(camera(quick)?);
-    figures.extend(eval(quick)?);
-    figures.extend(rectify(quick)?);
-    figures.extend(response(quick)?);
-    figures.extend(vignette(quick)?);
+    for (name, stage) in stages {
+        if only.is_none_or(|o| o == name) {
+            figures.extend(stage(quick)?);
+        }
+    }
     Ok(figures)
 }
 
@@ -418,6 +431,19 @@ pub fn vignette_errors(v: &Image<f32>, truth: &[f32]) -> (f64, f64) {
     ((s / n.max(1) as f64).sqrt(), n as f64 / truth.len() as f64)
 }
 
+/// Default options, with `MONOVO_VIGNETTE_ITERATIONS` overriding the iteration limit (for
+/// exploring the speed/accuracy trade-off).
+fn vignette_options() -> photometric::VignetteOptions {
+    let mut o = photometric::VignetteOptions::default();
+    if let Some(n) = std::env::var("MONOVO_VIGNETTE_ITERATIONS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        o.max_iterations = n;
+    }
+    o
+}
+
 /// Vignette calibration on a synthetic marker-plane sequence with the true poses.
 fn vignette(quick: bool) -> Result<Vec<Figure>> {
     use synthetic::plane::{PlaneConfig, PlaneSequence};
@@ -450,7 +476,7 @@ fn vignette(quick: bool) -> Result<Vec<Figure>> {
         ImageSize::new(w, h),
         &resp,
         &src,
-        &photometric::VignetteOptions::default(),
+        &vignette_options(),
         &|_, _| {},
     )?;
     let secs = t0.elapsed().as_secs_f64();
