@@ -323,23 +323,6 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
     ])
 }
 
-/// Max and RMS (after the best least-squares scale) error of an inverse response against the
-/// truth over 0..254, both scaled to U(255) = 255.
-pub fn response_errors(got: &[f64; 256], truth: &[f64; 256]) -> (f64, f64) {
-    let max = (0..255)
-        .map(|k| (got[k] - truth[k]).abs())
-        .fold(0.0, f64::max);
-    let num: f64 = (0..255).map(|k| got[k] * truth[k]).sum();
-    let den: f64 = (0..255).map(|k| got[k] * got[k]).sum();
-    let s = num / den;
-    let rms = ((0..255)
-        .map(|k| (s * got[k] - truth[k]).powi(2))
-        .sum::<f64>()
-        / 255.0)
-        .sqrt();
-    (max, rms)
-}
-
 /// One response calibration on a synthetic sweep: (max error, rms error, seconds, iterations,
 /// peak MB, strictly increasing).
 pub fn response_run(
@@ -359,7 +342,7 @@ pub fn response_run(
     let cal = photometric::calibrate_response(&mut imgs, &sweep.exposures_ms, opts, &|_, _| {})?;
     let secs = t.elapsed().as_secs_f64();
     let u = cal.response.values();
-    let (max, rms) = response_errors(u, &sweep.response);
+    let (max, rms) = cal.response.errors_against(&sweep.response);
     let inc = (1..256).all(|k| u[k] > u[k - 1]);
     Ok((max, rms, secs, cal.iterations, peak_rss_mb(), inc))
 }

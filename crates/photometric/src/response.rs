@@ -92,6 +92,25 @@ impl InverseResponse {
         self.u.map(|v| v as f32)
     }
 
+    /// Differences to a reference table over the grey values 0..254: the largest absolute
+    /// difference with both as given (normally both scaled to `U(255) = 255`), and the RMS
+    /// difference after the least-squares scale of `self` (`U` is only defined up to scale).
+    pub fn errors_against(&self, reference: &[f64; 256]) -> (f64, f64) {
+        let u = &self.u;
+        let max = (0..255)
+            .map(|k| (u[k] - reference[k]).abs())
+            .fold(0.0, f64::max);
+        let num: f64 = (0..255).map(|k| u[k] * reference[k]).sum();
+        let den: f64 = (0..255).map(|k| u[k] * u[k]).sum();
+        let s = if den > 0.0 { num / den } else { 1.0 };
+        let rms = ((0..255)
+            .map(|k| (s * u[k] - reference[k]).powi(2))
+            .sum::<f64>()
+            / 255.0)
+            .sqrt();
+        (max, rms)
+    }
+
     /// The same response scaled so that `U(255) = 255`.
     pub fn normalized(&self) -> InverseResponse {
         let s = 255.0 / self.u[255];

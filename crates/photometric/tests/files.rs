@@ -69,3 +69,15 @@ fn vignette_is_normalised_and_zero_pixels_are_masked() {
     assert!(Vignette::from_values(Image::filled(4, 4, f32::NAN)).is_err());
     assert!(v.check_size(8, 6).is_ok() && v.check_size(6, 8).is_err());
 }
+
+#[test]
+fn response_errors_are_scale_aware() {
+    let truth = ground_truth_response();
+    let u = InverseResponse::new(truth).unwrap();
+    assert_eq!(u.errors_against(&truth), (0.0, 0.0));
+    // a scaled copy has a max error but no RMS error after the best scale
+    let scaled = InverseResponse::new(truth.map(|v| v * 1.05)).unwrap();
+    let (max, rms) = scaled.errors_against(&truth);
+    assert!((max - 0.05 * truth[254]).abs() < 1e-9, "{max}");
+    assert!(rms < 1e-9, "{rms}");
+}

@@ -3,21 +3,6 @@ use camera_model::Image;
 use photometric::{calibrate_response, PhotometricError, ResponseOptions};
 use synthetic::scene::Sweep;
 
-fn errors(got: &[f64; 256], truth: &[f64; 256]) -> (f64, f64) {
-    let max = (0..255)
-        .map(|k| (got[k] - truth[k]).abs())
-        .fold(0.0, f64::max);
-    let num: f64 = (0..255).map(|k| got[k] * truth[k]).sum();
-    let den: f64 = (0..255).map(|k| got[k] * got[k]).sum();
-    let s = num / den;
-    let rms = ((0..255)
-        .map(|k| (s * got[k] - truth[k]).powi(2))
-        .sum::<f64>()
-        / 255.0)
-        .sqrt();
-    (max, rms)
-}
-
 fn run(
     w: usize,
     h: usize,
@@ -31,7 +16,7 @@ fn run(
         .map(|i| Image::new(w, h, sweep.render(i)).unwrap())
         .collect();
     let cal = calibrate_response(&mut frames, &sweep.exposures_ms, opts, &|_, _| {}).unwrap();
-    let (max, rms) = errors(cal.response.values(), &sweep.response);
+    let (max, rms) = cal.response.errors_against(&sweep.response);
     (max, rms, cal)
 }
 

@@ -205,10 +205,7 @@ pub fn run(args: &Args) -> Result<()> {
         cal.response.to_text().as_bytes(),
     )?;
     calib::response_figure(&cal, Some(&sweep.response), &dir.join("response.png"))?;
-    let u = cal.response.values();
-    let max_err = (0..255)
-        .map(|k| (u[k] - sweep.response[k]).abs())
-        .fold(0.0, f64::max);
+    let (max_err, _) = cal.response.errors_against(&sweep.response);
     println!(
         "      {} iterations, max |U - U_true| = {max_err:.3} grey levels, {cal_secs:.1} s",
         cal.iterations
