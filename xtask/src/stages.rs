@@ -400,20 +400,6 @@ impl photometric::PlaneFrames for MemoryPlaneFrames {
     }
 }
 
-/// RMS relative error of a vignette against the truth over valid pixels, and the valid fraction.
-pub fn vignette_errors(v: &Image<f32>, truth: &[f32]) -> (f64, f64) {
-    let mut s = 0.0;
-    let mut n = 0usize;
-    for (a, b) in v.data().iter().zip(truth) {
-        if a.is_finite() {
-            let r = (*a as f64 - *b as f64) / *b as f64;
-            s += r * r;
-            n += 1;
-        }
-    }
-    ((s / n.max(1) as f64).sqrt(), n as f64 / truth.len() as f64)
-}
-
 /// Default options, with `MONOVO_VIGNETTE_ITERATIONS` overriding the iteration limit (for
 /// exploring the speed/accuracy trade-off).
 fn vignette_options() -> photometric::VignetteOptions {
@@ -464,8 +450,8 @@ fn vignette(quick: bool) -> Result<Vec<Figure>> {
     )?;
     let secs = t0.elapsed().as_secs_f64();
     let mem = peak_rss_mb();
-    let (rms, valid) = vignette_errors(&cal.vignette, &truth);
-    let (srms, _) = vignette_errors(&cal.smoothed, &truth);
+    let (rms, valid) = photometric::vignette_errors(cal.vignette.data(), &truth);
+    let (srms, _) = photometric::vignette_errors(cal.smoothed.data(), &truth);
     println!(
         "  {w}x{h} x {n}, true poses: rms {:.3}% (smoothed {:.3}%), valid {:.1}%, {} iterations, {secs:.1} s, {mem:.0} MB",
         rms * 100.0,
@@ -510,7 +496,7 @@ fn vignette(quick: bool) -> Result<Vec<Figure>> {
         &photometric::VignetteOptions::default(),
         &|_, _| {},
     )?;
-    let (drms, dvalid) = vignette_errors(&cal_d.vignette, &truth);
+    let (drms, dvalid) = photometric::vignette_errors(cal_d.vignette.data(), &truth);
     println!(
         "  detected markers: rms {:.3}%, valid {:.1}%",
         drms * 100.0,

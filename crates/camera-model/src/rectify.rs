@@ -228,10 +228,9 @@ fn crop_numeric(
     let base = [x0, x1, y0, y1];
     let scaled = |s: f64| k_from_rect([s * x0, s * x1, s * y0, s * y1], out_size);
     let border_ok = |k: &Intrinsics| {
-        let out = Intrinsics { ..*k };
         border_pixels(out_size).all(|p| {
             input
-                .project_normalized(out.pixel_to_normalized(p))
+                .project_normalized(k.pixel_to_normalized(p))
                 .is_some_and(|src| inside(src, in_size))
         })
     };

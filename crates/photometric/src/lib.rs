@@ -39,7 +39,7 @@ pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
 pub use response::InverseResponse;
 pub use response_calib::{calibrate_response, ResponseCalibration, ResponseOptions};
-pub use vignette::Vignette;
+pub use vignette::{vignette_errors, Vignette};
 pub use vignette_calib::{
     calibrate_vignette, smooth_masked, PlaneFrame, PlaneFrames, PlanePose, VignetteCalibration,
     VignetteOptions,

@@ -88,3 +88,21 @@ impl Vignette {
         Ok(())
     }
 }
+
+/// RMS relative error `(estimate - truth) / truth` of a vignette map over its valid (finite)
+/// pixels, and the fraction of pixels that are valid.
+pub fn vignette_errors(estimate: &[f32], truth: &[f32]) -> (f64, f64) {
+    let mut s = 0.0;
+    let mut n = 0usize;
+    for (a, b) in estimate.iter().zip(truth) {
+        if a.is_finite() {
+            let r = (*a as f64 - *b as f64) / *b as f64;
+            s += r * r;
+            n += 1;
+        }
+    }
+    (
+        (s / n.max(1) as f64).sqrt(),
+        n as f64 / truth.len().max(1) as f64,
+    )
+}

@@ -249,14 +249,7 @@ pub fn run(args: &Args) -> Result<()> {
     let vig_secs = t.elapsed().as_secs_f64();
     let (est, _) = dataset_io::read_gray16(&dir.join("vignette_estimated.png"))?;
     let est_f = est.map(|v| if v == 0 { f32::NAN } else { v as f32 / 65535.0 });
-    let (mut s2, mut n2) = (0.0, 0usize);
-    for (a, b) in est_f.data().iter().zip(&wall.vignette) {
-        if a.is_finite() {
-            s2 += ((a - b) / b).powi(2) as f64;
-            n2 += 1;
-        }
-    }
-    let vig_rms = (s2 / n2.max(1) as f64).sqrt();
+    let (vig_rms, vig_valid) = photometric::vignette_errors(est_f.data(), &wall.vignette);
     calib::vignette_figure(&est_f, Some(&wall.vignette), &dir.join("vignette.png"))?;
     println!(
         "      RMS relative error of V: {:.3}% ({vig_secs:.1} s)",
@@ -267,7 +260,7 @@ pub fn run(args: &Args) -> Result<()> {
         "## Vignette calibration\n\n100 frames of a bright wall with ArUco marker 213 (poses from the detected marker): \
          RMS relative error of V against the truth **{:.3}%** over {:.1}% of the pixels ({vig_secs:.1} s).\n\n![vignette](vignette.png)\n",
         vig_rms * 100.0,
-        100.0 * n2 as f64 / wall.vignette.len() as f64
+        100.0 * vig_valid
     );
 
     // 4. rectification and photometric correction
