@@ -5,6 +5,7 @@
 //! figure is worse than the thresholds committed in `xtask/thresholds.json`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod response;
 mod stages;
 
 use std::path::PathBuf;

@@ -46,7 +46,7 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
         ("camera", camera),
         ("eval", eval),
         ("rectify", rectify),
-        ("response", response),
+        ("response", crate::response::stage),
         ("vignette", vignette),
     ];
     if let Some(o) = only {
@@ -320,61 +320,6 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
         },
         Figure::lower("rectify.png_encode_over_decode", png_ms / (1e3 / dec1), ""),
         Figure::lower("rectify.correction_max_rel_error", rel, ""),
-    ])
-}
-
-/// One response calibration on a synthetic sweep: (max error, rms error, seconds, iterations,
-/// peak MB, strictly increasing).
-pub fn response_run(
-    w: usize,
-    h: usize,
-    frames: usize,
-    t0: f64,
-    step: f64,
-    opts: &photometric::ResponseOptions,
-) -> Result<(f64, f64, f64, usize, f64, bool)> {
-    let sweep = synthetic::scene::Sweep::new(7, w, h, frames, t0, step);
-    reset_peak_rss();
-    let t = Instant::now();
-    let mut imgs: Vec<Image<u8>> = (0..frames)
-        .map(|i| Image::new(w, h, sweep.render(i)))
-        .collect::<Result<_, _>>()?;
-    let cal = photometric::calibrate_response(&mut imgs, &sweep.exposures_ms, opts, &|_, _| {})?;
-    let secs = t.elapsed().as_secs_f64();
-    let u = cal.response.values();
-    let (max, rms) = cal.response.errors_against(&sweep.response);
-    let inc = (1..256).all(|k| u[k] > u[k - 1]);
-    Ok((max, rms, secs, cal.iterations, peak_rss_mb(), inc))
-}
-
-/// Response calibration on synthetic sweeps with known truth.
-fn response(quick: bool) -> Result<Vec<Figure>> {
-    println!("stage response: synthetic exposure sweeps");
-    let opts = photometric::ResponseOptions::default();
-    let (w, h, n) = if quick {
-        (640, 512, 60)
-    } else {
-        (1280, 1024, 120)
-    };
-    let step = if quick { 1.05f64.powi(2) } else { 1.05 };
-    let (max, rms, secs, it, mb, _) = response_run(w, h, n, 0.05, step, &opts)?;
-    println!(
-        "  {w}x{h} x {n}: max {max:.3} rms {rms:.3} in {secs:.1} s, {it} iterations, {mb:.0} MB"
-    );
-    let (smax, srms, _, sit, _, inc) = response_run(320, 256, 12, 0.3, 1.6, &opts)?;
-    println!("  320x256 x 12: max {smax:.3} rms {srms:.3}, {sit} iterations, increasing {inc}");
-    let sweep_mb = (w * h * n) as f64 / 1048576.0;
-    Ok(vec![
-        Figure::lower("response.max_error", max, "grey"),
-        Figure::lower("response.rms_error", rms, "grey"),
-        Figure::lower("response.seconds", secs, "s"),
-        Figure::lower("response.peak_memory_over_sweep", mb / sweep_mb, ""),
-        Figure::lower("response.small_max_error", smax, "grey"),
-        Figure::lower(
-            "response.small_not_increasing",
-            f64::from(u8::from(!inc)),
-            "",
-        ),
     ])
 }
 

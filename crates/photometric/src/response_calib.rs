@@ -1,50 +1,111 @@
 //! Response calibration (paper section 2.3.1): the inverse response `U` from a static scene
-//! seen at known, varying exposures, by alternating least squares on
-//! `E(U, B') = sum_i sum_x (U(I_i(x)) - t_i B'(x))^2` (equations 6-8), iterated to convergence.
+//! seen at known, varying exposures.
 //!
-//! Differences to the reference tool, each measured on synthetic sweeps with known truth:
-//! * it iterates until the relative change of the energy falls below a tolerance instead of a
-//!   fixed 10 iterations;
-//! * saturation is censoring: a pixel just below 255 in a bright frame is there because its
-//!   noise happened to be negative, so observations above `censor_level` do not enter the
-//!   irradiance estimate `B'` (they still enter `U`, whose values there are then unbiased);
-//! * values never observed are filled by monotone interpolation / extrapolation, and the
-//!   result is made strictly increasing, so it is never NaN and DSO accepts it;
-//! * an optional smoothness prior on `U` (Debevec-Malik style) for small data sets.
+//! The model is the paper's, `I_i(x) = G(t_i B'(x)) + noise` with `G = U^-1`, fitted so that
+//! it holds on a real, noisy sensor:
+//!
+//! * **The residual is measured where the noise is.** The estimator minimises
+//!   `sum w (I_i(x) - G(t_i B'(x)))^2` in grey levels: a regression of the noisy observation
+//!   on the model's prediction, which is unbiased, where the paper's `U(k) = mean of t B'`
+//!   over the pixels of value `k` regresses the prediction on the noisy value. The forward
+//!   response `G` is the piecewise-linear inverse of the table `U(0..255)`.
+//! * **Observations are chosen by the model's prediction, never by the observed value.** An
+//!   observation enters only where the predicted grey value `G(t_i B'(x))` lies at least
+//!   `censor_sigmas` noise standard deviations inside `[0, 255]`, so neither saturation nor
+//!   the black level censors its noise. (Choosing by the observed value keeps a bright pixel
+//!   only when its noise was negative, and biases `U` low near saturation.) Saturated pixels
+//!   and a small border around them are dropped, as in the paper.
+//! * **Each observation is weighted by its noise.** The grey-level variance is modelled as
+//!   `(read + shot U(p)) / U'(p)^2 + adc` (read, photon shot and ADC noise through the
+//!   response) and fitted to the residuals; each pixel's weight is further scaled by its own
+//!   residual variance (shrunk towards the model), which down-weights hot pixels and pixels
+//!   where JPEG compression adds error.
+//! * **Newton steps on the profiled problem.** Each iteration takes a Gauss-Newton step for
+//!   every pixel's `B'` and then a Gauss-Newton step for `U` in which `B'` is eliminated
+//!   (its Schur complement, accumulated from a subsample of pixels): it converges in a few
+//!   passes over the data where the paper's alternation creeps.
+//! * **A prior only where the data are blind.** With exposures in constant steps of a ratio
+//!   `r`, every `U` multiplied by a function periodic in `log U` with period `log r` fits the
+//!   data exactly as well (each pixel's `B'` absorbs it): a sweep determines `U` only up to
+//!   such ripples. A third-difference prior on `U` removes them; its weight grows with the
+//!   ripple period that the exposure steps allow, so that on the paper's sweep (steps of
+//!   1.05) it is weak and on a few widely spaced exposures it is strong. It also continues
+//!   `U` where the data say nothing: the few values next to 0 and 255 that the censoring
+//!   leaves out follow the quadratic continuation of the well-observed values, never biased
+//!   top values. The result is scaled to `U(255) = 255`, finite and strictly increasing.
+//! * **With its uncertainty.** The standard error of every `U(k)` (on the `U(255) = 255`
+//!   scale) combines the sampling error, from the sandwich covariance of the Newton step with
+//!   blocks of 8 image rows as independent units (JPEG's 8x8 blocks correlate neighbouring
+//!   pixels), and the error the prior may add, from the change of `U` when the prior is ten
+//!   times weaker.
 
 use camera_model::Image;
+use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::{InverseResponse, PhotometricError};
+
+/// Number of grey values of an 8-bit frame.
+const LEVELS: usize = 256;
+
+/// The grey value whose `U` fixes the scale during the iteration.
+const GAUGE: usize = 128;
 
 /// Options of [`calibrate_response`].
 #[derive(Clone, Debug)]
 pub struct ResponseOptions {
     /// Iteration limit.
     pub max_iterations: usize,
-    /// Stop when the relative change of the energy between iterations is below this.
+    /// Stop when the largest change of `U` (scaled to `U(255) = 255`) between two iterations
+    /// is below this many grey levels.
     pub tolerance: f64,
-    /// Weight of the second-difference smoothness prior, relative to the mean number of
-    /// observations per grey value (0 = the paper's unregularised method).
+    /// Strength of the third-difference prior, relative to the strength the exposure steps
+    /// call for (see the module documentation); 0 leaves the data's blind directions to the
+    /// iteration.
     pub smoothness: f64,
     /// Radius (pixels) of the neighbourhood dropped around saturated pixels.
     pub saturation_border: usize,
-    /// Observations above this grey value do not enter the irradiance estimate.
-    pub censor_level: u8,
-    /// Grey values observed fewer times than this count as unobserved.
+    /// An observation enters only where the model predicts a grey value at least this many
+    /// noise standard deviations away from 0 and from 255.
+    pub censor_sigmas: f64,
+    /// Grey values with fewer observations count as not determined by the data.
     pub min_count: u64,
 }
 
 impl Default for ResponseOptions {
     fn default() -> Self {
         ResponseOptions {
-            max_iterations: 200,
-            tolerance: 1e-6,
-            smoothness: 0.5,
+            max_iterations: 50,
+            tolerance: 0.01,
+            smoothness: std::env::var("MONOVO_SMOOTH").ok().and_then(|v| v.parse().ok()).unwrap_or(10.0),
             saturation_border: 1,
-            censor_level: 245,
+            censor_sigmas: 3.0,
             min_count: 20,
         }
+    }
+}
+
+/// The grey-level noise of one observation as a function of its expected grey value `p`:
+/// variance `(read + shot U(p)) / U'(p)^2 + adc` (grey levels squared), with `U'` the
+/// slope of the inverse response per grey level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseModel {
+    /// Signal-independent noise before the response (read noise), in U-units squared.
+    pub read: f64,
+    /// Photon shot noise: variance per U-unit of signal.
+    pub shot: f64,
+    /// Noise after the response (ADC, quantisation), in grey levels squared.
+    pub adc: f64,
+}
+
+impl NoiseModel {
+    /// The variance at expected grey value `p` for the inverse response `u`.
+    pub fn variance(&self, u: &[f64; LEVELS], p: f64) -> f64 {
+        let p = p.clamp(0.0, 255.0);
+        let k = (p.round() as usize).min(255);
+        let slope = slope_at(u, k);
+        let up = interp(u, p).max(0.0);
+        ((self.read + self.shot * up) / (slope * slope) + self.adc).max(1e-3)
     }
 }
 
@@ -53,29 +114,45 @@ impl Default for ResponseOptions {
 pub struct ResponseCalibration {
     /// The inverse response, `U(255) = 255`, strictly increasing.
     pub response: InverseResponse,
+    /// Standard error of each `U(k)` on the same scale (0 at 255, which is fixed).
+    pub std_error: Vec<f64>,
+    /// The part of the standard error that the prior may add (see the module documentation).
+    pub prior_error: Vec<f64>,
     /// Iterations run.
     pub iterations: usize,
     /// Whether the tolerance was reached.
     pub converged: bool,
-    /// Root-mean-square residual `U(I) - t B'` in grey-value units (U scaled to 255).
+    /// Largest change of `U` (grey levels, `U(255) = 255`) in each iteration.
+    pub change: Vec<f64>,
+    /// Root-mean-square residual `I - G(t B')` of the observations used, in grey levels.
     pub rmse: f64,
-    /// Smallest and largest grey value with at least `min_count` observations.
+    /// Smallest and largest grey value determined by the data (the rest follows from the
+    /// prior).
     pub observed_range: (u8, u8),
-    /// Grey values filled by interpolation or extrapolation.
+    /// Grey values not determined by the data (continued by the prior).
     pub filled: Vec<u8>,
-    /// Observations per grey value.
+    /// Observations per grey value (after the saturation mask).
     pub histogram: Vec<u64>,
-    /// Energy after each iteration (U scaled to 255).
-    pub energy: Vec<f64>,
+    /// Observations that entered the last iteration, per predicted grey value.
+    pub used: Vec<u64>,
+    /// Predicted grey values in which observations were used.
+    pub censor_range: (f64, f64),
+    /// The fitted noise model.
+    pub noise: NoiseModel,
+    /// Weight of the prior relative to the mean information per grey value.
+    pub prior_weight: f64,
+    /// Pixels whose observations entered the estimate.
+    pub pixels_used: usize,
+    /// Things the user should know (little data at one end, few exposures).
+    pub warnings: Vec<String>,
 }
 
 /// Sets saturated pixels and their neighbourhood of `radius` to 255 (= ignored), in place.
 fn mask_saturation(frame: &mut [u8], width: usize, height: usize, radius: usize) {
-    if radius == 0 {
+    if radius == 0 || width == 0 {
         return;
     }
     let sat: Vec<bool> = frame.iter().map(|&v| v == 255).collect();
-    // horizontal then vertical dilation
     let mut h = vec![false; sat.len()];
     for y in 0..height {
         let row = &sat[y * width..(y + 1) * width];
@@ -96,117 +173,898 @@ fn mask_saturation(frame: &mut [u8], width: usize, height: usize, radius: usize)
     }
 }
 
-/// Solves `a x = b` for a dense symmetric positive (semi-)definite system by Gaussian
-/// elimination with partial pivoting; `None` when singular.
-fn solve_dense(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
-    for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-300 {
-            return None;
-        }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..n {
-            let f = a[r][c] / a[c][c];
-            if f == 0.0 {
-                continue;
-            }
-            let (top, bottom) = a.split_at_mut(r);
-            for (x, p) in bottom[0][c..].iter_mut().zip(&top[c][c..]) {
-                *x -= f * p;
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = vec![0.0; n];
-    for r in (0..n).rev() {
-        let s: f64 = (r + 1..n).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+/// `U'` at grey value `k`: the secant over `k - 3 ..= k + 3` (shortened at the ends), at
+/// least a twentieth of the mean slope (noise in `U` must not make the noise model explode).
+fn slope_at(u: &[f64; LEVELS], k: usize) -> f64 {
+    let a = k.saturating_sub(3);
+    let b = (k + 3).min(255);
+    let s = (u[b] - u[a]) / (b - a) as f64;
+    let mean = (u[255] - u[0]).abs() / 255.0;
+    s.max(0.05 * mean).max(1e-12)
 }
 
-/// Fills unobserved values by linear interpolation between observed neighbours and linear
-/// extrapolation at the ends, then makes the table strictly increasing (pool-adjacent-
-/// violators, then a tiny ramp where values tie).
-fn fill_and_make_monotone(u: &mut [f64; 256], observed: &[bool; 256]) -> Vec<u8> {
-    let obs: Vec<usize> = (0..256).filter(|&k| observed[k]).collect();
-    let mut filled = Vec::new();
-    for k in 0..256 {
-        if observed[k] {
+/// `U` at a fractional grey value (linear interpolation).
+fn interp(u: &[f64; LEVELS], p: f64) -> f64 {
+    let p = p.clamp(0.0, 255.0);
+    let j = (p as usize).min(254);
+    let f = p - j as f64;
+    u[j] + f * (u[j + 1] - u[j])
+}
+
+/// The forward response `G = U^-1` of a strictly increasing table, piecewise linear, with a
+/// lookup table over `sqrt(energy)` that makes each evaluation a few operations.
+struct Forward {
+    u: [f64; LEVELS],
+    inv_du: [f64; LEVELS],
+    lut: Vec<u8>,
+    lut_scale: f64,
+}
+
+const LUT_SIZE: usize = 4096;
+
+impl Forward {
+    fn new(u: &[f64; LEVELS]) -> Forward {
+        let mut inv_du = [0.0; LEVELS];
+        for j in 0..255 {
+            inv_du[j] = 1.0 / (u[j + 1] - u[j]).max(1e-12);
+        }
+        let top = u[255].max(1e-12);
+        let lut_scale = LUT_SIZE as f64 / top.sqrt();
+        let mut lut = vec![0u8; LUT_SIZE + 1];
+        let mut j = 0usize;
+        for (b, slot) in lut.iter_mut().enumerate() {
+            let e = (b as f64 / lut_scale).powi(2);
+            while j < 254 && u[j + 1] <= e {
+                j += 1;
+            }
+            *slot = j as u8;
+        }
+        Forward {
+            u: *u,
+            inv_du,
+            lut,
+            lut_scale,
+        }
+    }
+
+    /// `(j, f)` with `G(e) = j + f`, `f` in `[0, 1)`; `None` outside `[U(0), U(255)]`.
+    #[inline]
+    fn eval(&self, e: f64) -> Option<(usize, f64)> {
+        if !(e >= self.u[0] && e < self.u[255]) {
+            return None;
+        }
+        let b = ((e.sqrt() * self.lut_scale) as usize).min(LUT_SIZE);
+        let mut j = self.lut[b] as usize;
+        while j < 254 && self.u[j + 1] <= e {
+            j += 1;
+        }
+        let f = ((e - self.u[j]) * self.inv_du[j]).clamp(0.0, 1.0);
+        Some((j, f))
+    }
+}
+
+
+/// Per-pixel state.
+#[derive(Clone, Copy, Debug, Default)]
+struct PixelState {
+    /// Irradiance `B'` (U-units per ms); NaN when the pixel has no usable observation.
+    b: f64,
+    /// Relative noise variance of the pixel (1 = as the noise model says).
+    s: f64,
+    /// Observations selected in the last B step.
+    n: u32,
+}
+
+/// Sums of one pass over a chunk of pixels, merged in a fixed order (bit-identical results
+/// with any number of threads).
+#[derive(Clone)]
+struct Sums {
+    /// Normal matrix of the U step with `B'` held fixed: diagonal and first off-diagonal.
+    diag: Vec<f64>,
+    off: Vec<f64>,
+    /// Gradient `sum w a r`.
+    rhs: Vec<f64>,
+    /// The profiled normal matrix (`B'` eliminated pixel by pixel: the Schur complement),
+    /// dense; filled after the pass from `bins`.
+    hess: Vec<f64>,
+    /// Pixels by `B'` (log-spaced bins over the selectable range), weighted by `1 / s`.
+    bins: Vec<f64>,
+    /// Residual sums of squares and counts per predicted grey value (noise model).
+    rss: Vec<f64>,
+    cnt: Vec<f64>,
+    /// Observations used per predicted grey value.
+    used: Vec<u64>,
+    nobs: u64,
+    pixels: usize,
+}
+
+impl Sums {
+    fn new() -> Sums {
+        Sums {
+            diag: vec![0.0; LEVELS],
+            off: vec![0.0; LEVELS],
+            rhs: vec![0.0; LEVELS],
+            hess: Vec::new(),
+            bins: vec![0.0; B_BINS],
+            rss: vec![0.0; LEVELS],
+            cnt: vec![0.0; LEVELS],
+            used: vec![0; LEVELS],
+            nobs: 0,
+            pixels: 0,
+        }
+    }
+
+    fn add(&mut self, o: &Sums) {
+        for k in 0..LEVELS {
+            self.diag[k] += o.diag[k];
+            self.off[k] += o.off[k];
+            self.rhs[k] += o.rhs[k];
+            self.rss[k] += o.rss[k];
+            self.cnt[k] += o.cnt[k];
+            self.used[k] += o.used[k];
+        }
+        for (a, b) in self.bins.iter_mut().zip(&o.bins) {
+            *a += b;
+        }
+        self.nobs += o.nobs;
+        self.pixels += o.pixels;
+    }
+}
+
+/// What one iteration needs to know about the current model.
+struct Model<'a> {
+    fwd: Forward,
+    /// Variance per integer predicted grey value.
+    var: [f64; LEVELS],
+    /// Selection range of predicted grey values (reported) and the energies it maps to
+    /// (used: frozen with the range, so that changes of `U` near the ends do not move
+    /// observations in and out of the problem).
+    lo: f64,
+    hi: f64,
+    e_lo: f64,
+    e_hi: f64,
+    /// Where the taper of the weights towards the ends of the range begins.
+    e_lo_taper: f64,
+    e_hi_taper: f64,
+    exposures: &'a [f64],
+    /// Whether the pixels' relative variances follow the residuals (else frozen).
+    adapt: bool,
+    /// `B'` range of the bins (log-spaced).
+    b_min: f64,
+    b_max: f64,
+}
+
+/// `3 x^2 - 2 x^3` on `[0, 1]`.
+#[inline]
+fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// Log-spaced bins of `B'` for the profiled normal matrix.
+const B_BINS: usize = 1024;
+
+/// Pixels with fewer selected observations do not enter the U step.
+const MIN_PIXEL_OBS: u32 = 3;
+
+impl Model<'_> {
+    /// The observation's predicted grey value as `(knot, fraction)` if it is selected.
+    #[inline]
+    fn select(&self, t: f64, b: f64) -> Option<(usize, f64, f64)> {
+        let e = t * b;
+        if !(e > self.e_lo && e < self.e_hi) {
+            return None;
+        }
+        // weights fall smoothly to 0 at the ends of the range: an observation whose
+        // prediction moves across an end does not jump in or out of the problem
+        let c = if e < self.e_lo_taper {
+            smoothstep((e - self.e_lo) / (self.e_lo_taper - self.e_lo))
+        } else if e > self.e_hi_taper {
+            smoothstep((self.e_hi - e) / (self.e_hi - self.e_hi_taper))
+        } else {
+            1.0
+        };
+        let (j, f) = self.fwd.eval(e)?;
+        Some((j, f, c))
+    }
+
+    #[inline]
+    fn var_at(&self, j: usize, f: f64) -> f64 {
+        self.var[if f < 0.5 { j } else { j + 1 }]
+    }
+}
+
+/// Rows per chunk of the passes: the chunks are also the independent units of the sandwich
+/// covariance, tall enough to hold the 8x8 blocks of JPEG compression.
+const CHUNK_ROWS: usize = 8;
+
+/// One iteration over the pixels `start..start + state.len()`: a Gauss-Newton step for each
+/// pixel's `B'` (or the paper's closed form for pixels without a usable prediction), then,
+/// with the new `B'`, the gradient and normal equations of the U step, the residual
+/// statistics of the noise model, and for the Hessian subsample the profiled normal matrix.
+fn pass_chunk(
+    frames: &[Image<u8>],
+    model: &Model<'_>,
+    start: usize,
+    state: &mut [PixelState],
+) -> Sums {
+    let n = state.len();
+    let fwd = &model.fwd;
+    let u = &fwd.u;
+    // B step
+    let mut sjr = vec![0.0f64; n];
+    let mut sjj = vec![0.0f64; n];
+    let mut cnt = vec![0u32; n];
+    let mut num0 = vec![0.0f64; n];
+    let mut den0 = vec![0.0f64; n];
+    let mut cnt0 = vec![0u32; n];
+    for (f, &t) in frames.iter().zip(model.exposures) {
+        let px = &f.data()[start..start + n];
+        for (x, &k) in px.iter().enumerate() {
+            if k == 255 {
+                continue;
+            }
+            let b = state[x].b;
+            if b.is_finite() {
+                if let Some((j, fr, c)) = model.select(t, b) {
+                    let w = c / model.var_at(j, fr);
+                    let jac = t * fwd.inv_du[j];
+                    let r = k as f64 - (j as f64 + fr);
+                    sjr[x] += w * jac * r;
+                    sjj[x] += w * jac * jac;
+                    cnt[x] += 1;
+                }
+            }
+            // for pixels without a usable prediction: the paper's closed form from the
+            // observations in range, only to (re)start the pixel
+            let kf = k as f64;
+            if kf >= model.lo && kf <= model.hi {
+                num0[x] += t * u[k as usize];
+                den0[x] += t * t;
+                cnt0[x] += 1;
+            }
+        }
+    }
+    for x in 0..n {
+        let st = &mut state[x];
+        if cnt[x] >= 1 && sjj[x] > 0.0 {
+            let nb = st.b + sjr[x] / sjj[x];
+            st.b = if nb > 0.0 { nb } else { 0.5 * st.b };
+            st.n = cnt[x];
+        } else if den0[x] > 0.0 {
+            st.b = num0[x] / den0[x];
+            st.n = cnt0[x];
+        } else {
+            st.b = f64::NAN;
+            st.n = 0;
+        }
+    }
+    // U step sums with the new B', weighted by each pixel's relative variance of the last
+    // iteration; the residuals give this iteration's
+    let mut sums = Sums::new();
+    let mut rr = vec![0.0f64; n];
+    let mut rn = vec![0u32; n];
+    for (f, &t) in frames.iter().zip(model.exposures) {
+        let px = &f.data()[start..start + n];
+        for (x, &k) in px.iter().enumerate() {
+            let st = state[x];
+            if k == 255 || st.n < MIN_PIXEL_OBS {
+                continue;
+            }
+            let Some((j, fr, c)) = model.select(t, st.b) else {
+                continue;
+            };
+            let var = model.var_at(j, fr);
+            let r = k as f64 - (j as f64 + fr);
+            rr[x] += r * r / var;
+            rn[x] += 1;
+            let w = c / (var * st.s);
+            // the residual's derivatives: d r / d U(j) = (1 - f) / dU, d r / d U(j+1) = f / dU
+            let a0 = (1.0 - fr) * fwd.inv_du[j];
+            let a1 = fr * fwd.inv_du[j];
+            sums.diag[j] += w * a0 * a0;
+            sums.diag[j + 1] += w * a1 * a1;
+            sums.off[j] += w * a0 * a1;
+            sums.rhs[j] += w * a0 * r;
+            sums.rhs[j + 1] += w * a1 * r;
+            let kp = if fr < 0.5 { j } else { j + 1 };
+            sums.rss[kp] += r * r;
+            sums.cnt[kp] += 1.0;
+            sums.used[kp] += 1;
+            sums.nobs += 1;
+        }
+    }
+    // the pixels by B' for the profiled normal matrix
+    let scale = B_BINS as f64 / (model.b_max / model.b_min).ln();
+    for st in state.iter() {
+        if st.n >= MIN_PIXEL_OBS && st.b.is_finite() && st.b > 0.0 {
+            let pos = (st.b / model.b_min).ln() * scale;
+            if pos >= 0.0 && pos < B_BINS as f64 {
+                sums.bins[pos as usize] += 1.0 / st.s;
+            }
+        }
+    }
+    // the pixels' relative variances for the next iteration (this one used the last's)
+    const PRIOR_DOF: f64 = 4.0;
+    for x in 0..n {
+        let m = rn[x] as f64;
+        if m >= 2.0 {
+            if model.adapt {
+                state[x].s = (PRIOR_DOF + rr[x] * m / (m - 1.0)) / (PRIOR_DOF + m);
+            }
+            sums.pixels += 1;
+        }
+    }
+    sums
+}
+
+/// The profiled normal matrix of the U step: every pixel's block
+/// `[[N_x, g_x], [g_x^T, h_x]]` of the joint normal equations contributes its Schur complement
+/// `N_x - g_x g_x^T / h_x` (`B'` eliminated). Pixels of (nearly) equal `B'` contribute equal
+/// blocks scaled by their weight `1 / s`, so the sum is formed per bin of `B'` from the bin's
+/// centre, over every frame: the full-data matrix at the cost of a thousand pixels.
+fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec<f64> {
+    let fwd = &model.fwd;
+    let mut hess = vec![0.0f64; LEVELS * LEVELS];
+    let mut model_diag = vec![0.0f64; LEVELS];
+    let mut g = [0.0f64; LEVELS];
+    let step = (model.b_max / model.b_min).ln() / B_BINS as f64;
+    for (bin, &weight) in bins.iter().enumerate() {
+        if weight <= 0.0 {
             continue;
         }
-        filled.push(k as u8);
-        let below = obs.iter().rev().find(|&&j| j < k).copied();
-        let above = obs.iter().find(|&&j| j > k).copied();
-        u[k] = match (below, above) {
-            (Some(a), Some(b)) => u[a] + (u[b] - u[a]) * (k - a) as f64 / (b - a) as f64,
-            (Some(a), None) => {
-                // extrapolate with the slope over the last observed values
-                let a0 = obs
-                    .iter()
-                    .rev()
-                    .nth(8.min(obs.len() - 1))
-                    .copied()
-                    .unwrap_or(a);
-                let slope = if a > a0 {
-                    (u[a] - u[a0]) / (a - a0) as f64
-                } else {
-                    1.0
-                };
-                u[a] + slope.max(1e-6) * (k - a) as f64
+        let b = model.b_min * ((bin as f64 + 0.5) * step).exp();
+        let (mut lo, mut hi, mut h) = (LEVELS, 0usize, 0.0);
+        for &t in model.exposures {
+            let Some((j, fr, c)) = model.select(t, b) else {
+                continue;
+            };
+            let w = c * weight / model.var_at(j, fr);
+            let a0 = (1.0 - fr) * fwd.inv_du[j];
+            let a1 = fr * fwd.inv_du[j];
+            // d r / d B' = -t G'(t B')
+            let jb = t * fwd.inv_du[j];
+            hess[j * LEVELS + j] += w * a0 * a0;
+            hess[(j + 1) * LEVELS + j + 1] += w * a1 * a1;
+            hess[j * LEVELS + j + 1] += w * a0 * a1;
+            hess[(j + 1) * LEVELS + j] += w * a0 * a1;
+            model_diag[j] += w * a0 * a0;
+            model_diag[j + 1] += w * a1 * a1;
+            g[j] -= w * a0 * jb;
+            g[j + 1] -= w * a1 * jb;
+            h += w * jb * jb;
+            lo = lo.min(j);
+            hi = hi.max(j + 1);
+        }
+        if lo > hi {
+            continue;
+        }
+        if h > 0.0 {
+            for a in lo..=hi {
+                let ga = g[a] / h;
+                if ga != 0.0 {
+                    let row = &mut hess[a * LEVELS..(a + 1) * LEVELS];
+                    for c in lo..=hi {
+                        row[c] -= ga * g[c];
+                    }
+                }
             }
-            (None, Some(b)) => {
-                let b1 = obs.get(8.min(obs.len() - 1)).copied().unwrap_or(b);
-                let slope = if b1 > b {
-                    (u[b1] - u[b]) / (b1 - b) as f64
-                } else {
-                    1.0
-                };
-                (u[b] - slope.max(1e-6) * (b - k) as f64).max(0.0)
-            }
-            (None, None) => k as f64,
-        };
+        }
+        for v in &mut g[lo..=hi] {
+            *v = 0.0;
+        }
     }
-    // isotonic regression (pool adjacent violators), unweighted
-    let mut blocks: Vec<(f64, usize)> = Vec::with_capacity(256);
-    for &v in u.iter() {
-        blocks.push((v, 1));
+    // the model assumes every selected observation exists; the saturation mask and stuck
+    // pixels remove some: scale each value's rows and columns to the information the data
+    // actually have (a symmetric diagonal scaling keeps the matrix semi-definite)
+    let r: Vec<f64> = (0..LEVELS)
+        .map(|k| {
+            if model_diag[k] > 0.0 {
+                (actual_diag[k] / model_diag[k]).sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    for a in 0..LEVELS {
+        for c in 0..LEVELS {
+            hess[a * LEVELS + c] *= r[a] * r[c];
+        }
+    }
+    hess
+}
+
+/// One pass over all pixels in fixed chunks: the merged sums (in chunk order, so that the
+/// result does not depend on the number of threads) and each chunk's gradient.
+fn pass(frames: &[Image<u8>], model: &Model<'_>, state: &mut [PixelState]) -> (Sums, Vec<Vec<f64>>) {
+    let chunk = CHUNK_ROWS * frames[0].width().max(1);
+    let parts: Vec<Sums> = state
+        .par_chunks_mut(chunk)
+        .enumerate()
+        .map(|(c, st)| pass_chunk(frames, model, c * chunk, st))
+        .collect();
+    let mut total = Sums::new();
+    for p in &parts {
+        total.add(p);
+    }
+    let grads = parts.into_iter().map(|p| p.rhs).collect();
+    (total, grads)
+}
+
+/// The median information per grey value over the values with data.
+fn median_info(diag: &[f64]) -> f64 {
+    let mut v: Vec<f64> = diag.iter().copied().filter(|&d| d > 0.0).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The U step's linear system `A d = b` at `u`: the profiled normal matrix (or, without a
+/// Hessian subsample, the one with `B'` fixed) plus `lambda` times the prior, with `U(GAUGE)`
+/// held when `B'` is eliminated (scaling `U` then costs nothing).
+fn u_system(
+    u: &[f64; LEVELS],
+    sums: &Sums,
+    penalty: &DMatrix<f64>,
+    lambda: f64,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let mut a = penalty * lambda;
+    let uv = DVector::from_column_slice(u);
+    let pu = penalty * &uv * lambda;
+    let profiled = !sums.hess.is_empty();
+    if profiled {
+        for r in 0..LEVELS {
+            for c in 0..LEVELS {
+                a[(r, c)] += sums.hess[r * LEVELS + c];
+            }
+        }
+    } else {
+        for k in 0..LEVELS {
+            a[(k, k)] += sums.diag[k];
+            if k + 1 < LEVELS {
+                a[(k, k + 1)] += sums.off[k];
+                a[(k + 1, k)] += sums.off[k];
+            }
+        }
+    }
+    // the new model is G - a.d, so the residual becomes r + a.d
+    let mut b = DVector::from_fn(LEVELS, |k, _| -sums.rhs[k] - pu[k]);
+    if profiled {
+        for k in 0..LEVELS {
+            a[(GAUGE, k)] = 0.0;
+            a[(k, GAUGE)] = 0.0;
+        }
+        a[(GAUGE, GAUGE)] = 1.0;
+        b[GAUGE] = 0.0;
+    }
+    // a tiny ridge keeps the system definite where neither data nor prior reach
+    let ridge = 1e-12 * (0..LEVELS).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-300);
+    for k in 0..LEVELS {
+        a[(k, k)] += ridge;
+    }
+    (a, b)
+}
+
+fn singular() -> PhotometricError {
+    PhotometricError::Calibration(
+        "the response step has no unique solution (too little data); record more exposures"
+            .into(),
+    )
+}
+
+/// Solves the U step; returns the step (shortened to a fifth of the range when longer: far
+/// from the solution the linearisation is poor).
+fn solve_u_step(
+    u: &[f64; LEVELS],
+    sums: &Sums,
+    penalty: &DMatrix<f64>,
+    lambda: f64,
+) -> Result<[f64; LEVELS], PhotometricError> {
+    let (a, b) = u_system(u, sums, penalty, lambda);
+    let d = a.cholesky().ok_or_else(singular)?.solve(&b);
+    let range = (u[255] - u[0]).abs().max(1e-12);
+    let longest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let alpha = (0.2 * range / longest.max(1e-300)).min(1.0);
+    let mut out = *u;
+    for k in 0..LEVELS {
+        out[k] += alpha * d[k];
+    }
+    if out.iter().any(|v| !v.is_finite()) {
+        return Err(PhotometricError::Calibration(
+            "the response step diverged (not finite); the data do not determine U".into(),
+        ));
+    }
+    Ok(out)
+}
+
+/// The prior's weight relative to the information per grey value: `scale^6`, so that the
+/// prior smooths `U` over about `scale` grey values (a ripple of period `P` costs
+/// `(2 pi scale / P)^6` times the information) and leaves the data alone on longer scales.
+fn prior_weight(scale: f64) -> f64 {
+    scale.max(0.0).powi(6)
+}
+
+/// The third-difference operator's normal matrix `D3^T D3` (256 x 256).
+fn third_difference_normal() -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(LEVELS, LEVELS);
+    let c = [-1.0, 3.0, -3.0, 1.0];
+    for r in 0..LEVELS - 3 {
+        for (a, ca) in c.iter().enumerate() {
+            for (b, cb) in c.iter().enumerate() {
+                m[(r + a, r + b)] += ca * cb;
+            }
+        }
+    }
+    m
+}
+
+/// Makes `u` strictly increasing: weighted isotonic regression (pool adjacent violators)
+/// with the information per value as weights, then separation of ties.
+fn make_monotone(u: &mut [f64; LEVELS], weight: &[f64]) {
+    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(LEVELS);
+    for k in 0..LEVELS {
+        let w = weight[k].max(1e-12);
+        blocks.push((u[k], w, 1));
         while blocks.len() > 1 {
             let n = blocks.len();
-            if blocks[n - 2].0 <= blocks[n - 1].0 {
+            if blocks[n - 2].0 < blocks[n - 1].0 {
                 break;
             }
-            let (v2, c2) = blocks[n - 1];
-            let (v1, c1) = blocks[n - 2];
+            let (v2, w2, c2) = blocks[n - 1];
+            let (v1, w1, c1) = blocks[n - 2];
             blocks.truncate(n - 2);
-            blocks.push((
-                (v1 * c1 as f64 + v2 * c2 as f64) / (c1 + c2) as f64,
-                c1 + c2,
-            ));
+            blocks.push(((v1 * w1 + v2 * w2) / (w1 + w2), w1 + w2, c1 + c2));
         }
     }
     let mut k = 0;
-    for (v, c) in blocks {
+    for (v, _, c) in blocks {
         for _ in 0..c {
             u[k] = v;
             k += 1;
         }
     }
-    // strictly increasing: separate ties by a small fraction of the typical step
-    let eps = ((u[255] - u[0]).abs() / 255.0).max(1e-9) * 1e-3;
-    for k in 1..256 {
+    let eps = ((u[255] - u[0]).abs() / 255.0).max(1e-9) * 1e-4;
+    for k in 1..LEVELS {
         if u[k] <= u[k - 1] {
             u[k] = u[k - 1] + eps;
         }
     }
-    filled
+}
+
+/// Fits the noise model to residual variances per predicted grey value (non-negative least
+/// squares on the relative error of the bins with enough data).
+fn fit_noise(u: &[f64; LEVELS], rss: &[f64], cnt: &[f64]) -> Option<NoiseModel> {
+    let rows: Vec<(f64, [f64; 3], f64)> = (0..LEVELS)
+        .filter(|&k| cnt[k] >= 50.0)
+        .map(|k| {
+            let v = rss[k] / cnt[k];
+            let s = slope_at(u, k);
+            let feats = [1.0 / (s * s), u[k].max(0.0) / (s * s), 1.0];
+            // relative error: weight by count / v^2
+            (v, feats, cnt[k] / (v * v).max(1e-6))
+        })
+        .collect();
+    if rows.len() < 8 {
+        return None;
+    }
+    let mut best: Option<(f64, [f64; 3])> = None;
+    // all non-empty active sets of the three non-negative terms
+    for mask in 1u8..8 {
+        let idx: Vec<usize> = (0..3).filter(|i| mask >> i & 1 == 1).collect();
+        let m = idx.len();
+        let mut ata = DMatrix::<f64>::zeros(m, m);
+        let mut atb = DVector::<f64>::zeros(m);
+        for (v, f, w) in &rows {
+            for (a, &ia) in idx.iter().enumerate() {
+                atb[a] += w * f[ia] * v;
+                for (b, &ib) in idx.iter().enumerate() {
+                    ata[(a, b)] += w * f[ia] * f[ib];
+                }
+            }
+        }
+        let Some(sol) = ata.cholesky().map(|c| c.solve(&atb)) else {
+            continue;
+        };
+        if sol.iter().any(|&x| !(x >= 0.0) || !x.is_finite()) {
+            continue;
+        }
+        let mut coef = [0.0; 3];
+        for (a, &ia) in idx.iter().enumerate() {
+            coef[ia] = sol[a];
+        }
+        let cost: f64 = rows
+            .iter()
+            .map(|(v, f, w)| {
+                let pred = coef[0] * f[0] + coef[1] * f[1] + coef[2] * f[2];
+                w * (v - pred).powi(2)
+            })
+            .sum();
+        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+            best = Some((cost, coef));
+        }
+    }
+    best.map(|(_, c)| NoiseModel {
+        read: c[0],
+        shot: c[1],
+        adc: c[2],
+    })
+}
+
+/// The selection range `[lo, hi]` of predicted grey values: at least `z` standard deviations
+/// from the clipping points -0.5 and 254.5.
+fn censor_range(var: &[f64; LEVELS], z: f64) -> (f64, f64) {
+    let lo = (0..LEVELS)
+        .find(|&k| k as f64 - z * var[k].sqrt() >= -0.5)
+        .unwrap_or(0) as f64;
+    let hi = (0..LEVELS)
+        .rev()
+        .find(|&k| k as f64 + z * var[k].sqrt() <= 254.5)
+        .unwrap_or(254) as f64;
+    (lo, hi.max(lo + 1.0))
+}
+
+fn variance_table(u: &[f64; LEVELS], noise: &NoiseModel) -> [f64; LEVELS] {
+    let mut v = [0.0; LEVELS];
+    for (k, x) in v.iter_mut().enumerate() {
+        *x = noise.variance(u, k as f64);
+    }
+    v
+}
+
+/// The data and settings of one calibration.
+struct Solver<'a> {
+    frames: &'a [Image<u8>],
+    exposures: &'a [f64],
+    options: &'a ResponseOptions,
+    penalty: DMatrix<f64>,
+    /// `log` of the largest ratio between consecutive distinct exposures.
+    log_gap: f64,
+}
+
+/// The converged state.
+struct Solution {
+    u: [f64; LEVELS],
+    /// The table at which `sums` and `grads` were taken (the one before the last step).
+    u_prev: [f64; LEVELS],
+    noise: NoiseModel,
+    lo: f64,
+    hi: f64,
+    /// Prior weight relative to the mean information.
+    prior: f64,
+    /// Absolute prior weight of the last step.
+    lambda: f64,
+    sums: Sums,
+    grads: Vec<Vec<f64>>,
+    iterations: usize,
+    converged: bool,
+    change: Vec<f64>,
+}
+
+/// Iterations during which the noise model, the selection range and the prior weight follow
+/// the data; then they are frozen, so that the iteration converges on a fixed problem.
+const ADAPT_ITERATIONS: usize = 6;
+
+
+impl Solver<'_> {
+    /// Runs the iteration from a linear `U`.
+    fn run(&self, progress: &(dyn Fn(usize, f64) + Sync)) -> Result<Solution, PhotometricError> {
+        let npx = self.frames[0].data().len();
+        let mut u = [0.0; LEVELS];
+        for (k, v) in u.iter_mut().enumerate() {
+            *v = k as f64;
+        }
+        let mut state = vec![
+            PixelState {
+                b: f64::NAN,
+                s: 1.0,
+                n: 0
+            };
+            npx
+        ];
+        let mut noise: Option<NoiseModel> = None;
+        let mut var = [1.0; LEVELS];
+        let (mut lo, mut hi) = (8.0, 245.0);
+        let (mut e_lo, mut e_hi) = (lo, hi);
+        let (mut e_lo_taper, mut e_hi_taper) = (lo + 2.0, hi - 2.0);
+        let prior = prior_weight(self.options.smoothness);
+        let (t_min, t_max) = self
+            .exposures
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &t| (a.min(t), b.max(t)));
+        let mut change: Vec<f64> = Vec::new();
+        let mut last_step = vec![0.0; LEVELS];
+        let mut relax = 1.0f64;
+        let mut converged = false;
+        let mut iterations = 0;
+        let mut last = None;
+        for it in 0..self.options.max_iterations.max(1) {
+            iterations = it + 1;
+            let adapt = it < ADAPT_ITERATIONS;
+            if adapt {
+                if let Some(nm) = &noise {
+                    var = variance_table(&u, nm);
+                    (lo, hi) = censor_range(&var, self.options.censor_sigmas);
+                }
+            }
+            if adapt {
+                (e_lo, e_hi) = (interp(&u, lo), interp(&u, hi));
+                // the taper spans one noise standard deviation (at least 2 grey values)
+                let d_lo = var[lo as usize].sqrt().max(2.0);
+                let d_hi = var[hi as usize].sqrt().max(2.0);
+                e_lo_taper = interp(&u, (lo + d_lo).min(hi));
+                e_hi_taper = interp(&u, (hi - d_hi).max(lo)).max(e_lo_taper);
+            }
+            let model = Model {
+                fwd: Forward::new(&u),
+                var,
+                lo,
+                hi,
+                e_lo,
+                e_hi,
+                e_lo_taper,
+                e_hi_taper,
+                exposures: self.exposures,
+                adapt,
+                b_min: (e_lo / t_max).max(1e-300),
+                b_max: (e_hi / t_min).max(e_lo / t_max * 1.0001),
+            };
+            let (mut sums, grads) = pass(self.frames, &model, &mut state);
+            if sums.nobs == 0 {
+                return Err(PhotometricError::Calibration(
+                    "no pixel has enough unsaturated observations at different exposures".into(),
+                ));
+            }
+            sums.hess = profiled_hessian(&model, &sums.bins, &sums.diag);
+            let lambda = prior * median_info(&sums.diag) + 1e-12;
+            let mut nu = solve_u_step(&u, &sums, &self.penalty, lambda)?;
+            let info: Vec<f64> = sums.diag.iter().map(|d| d + lambda).collect();
+            for v in nu.iter_mut() {
+                // U(0) is the black level: nothing below zero
+                *v = v.max(0.0);
+            }
+            make_monotone(&mut nu, &info);
+            // the gauge: U(GAUGE) stays (B' scales with U); U(255) = 255 at the end
+            let s = u[GAUGE] / nu[GAUGE];
+            for v in nu.iter_mut() {
+                *v *= s;
+            }
+            for st in state.iter_mut() {
+                st.b *= s;
+            }
+            e_lo *= s;
+            e_hi *= s;
+            e_lo_taper *= s;
+            e_hi_taper *= s;
+            // once the problem is frozen, steps that reverse the last one (a two-cycle: the
+            // Newton step overshoots along a direction the model underestimates) are
+            // shortened until they stop reversing
+            let step: Vec<f64> = (0..LEVELS).map(|k| nu[k] - u[k]).collect();
+            if !adapt && it > ADAPT_ITERATIONS {
+                let dot: f64 = step.iter().zip(&last_step).map(|(a, b)| a * b).sum();
+                relax = if dot < 0.0 {
+                    (relax * 0.5).max(1.0 / 64.0)
+                } else {
+                    (relax * 1.5).min(1.0)
+                };
+                for k in 0..LEVELS {
+                    nu[k] = u[k] + relax * step[k];
+                }
+            }
+            last_step = (0..LEVELS).map(|k| nu[k] - u[k]).collect();
+            let delta = last_step.iter().fold(0.0f64, |m, v| m.max(v.abs())) * 255.0 / nu[255];
+            change.push(delta);
+            if adapt {
+                if let Some(nm) = fit_noise(&nu, &sums.rss, &sums.cnt) {
+                    noise = Some(nm);
+                }
+            }
+            let u_prev = u;
+            u = nu;
+            last = Some((u_prev, sums, grads, lambda));
+            progress(iterations, delta);
+            if std::env::var_os("MONOVO_DEBUG").is_some() {
+                eprintln!("it {it} lo {lo} hi {hi} prior {prior:.3e} nobs {} delta {delta:.4} at {}", last.as_ref().map_or(0, |l: &([f64; LEVELS], Sums, Vec<Vec<f64>>, f64)| l.1.nobs), (0..LEVELS).max_by(|&a, &b| (u[a] - last.as_ref().map_or(0.0, |l| l.0[a])).abs().total_cmp(&(u[b] - last.as_ref().map_or(0.0, |l| l.0[b])).abs())).unwrap_or(0));
+            }
+            if delta < self.options.tolerance && it >= ADAPT_ITERATIONS {
+                converged = true;
+                break;
+            }
+        }
+        let Some((u_prev, sums, grads, lambda)) = last else {
+            return Err(singular());
+        };
+        Ok(Solution {
+            u,
+            u_prev,
+            noise: noise.unwrap_or(NoiseModel {
+                read: 0.0,
+                shot: 0.0,
+                adc: 1.0,
+            }),
+            lo,
+            hi,
+            prior,
+            lambda,
+            sums,
+            grads,
+            iterations,
+            converged,
+            change,
+        })
+    }
+}
+
+/// `u` scaled to `U(255) = 255`.
+fn normalized(u: &[f64; LEVELS]) -> [f64; LEVELS] {
+    let s = 255.0 / u[255];
+    u.map(|v| v * s)
+}
+
+/// Standard errors of the normalised table: the sandwich covariance of the last Newton step
+/// (chunks of rows as the independent units), through the normalisation `U(255) = 255`, and
+/// the prior's part from the step with a ten times weaker prior. Returns (total, prior part).
+fn standard_errors(
+    sol: &Solution,
+    penalty: &DMatrix<f64>,
+) -> Result<(Vec<f64>, Vec<f64>), PhotometricError> {
+    let (a, _) = u_system(&sol.u_prev, &sol.sums, penalty, sol.lambda);
+    let chol = a.cholesky().ok_or_else(singular)?;
+    // meat: centred chunk gradients (GAUGE is held, so its component is zero)
+    let c = sol.grads.len();
+    let mut meat = DMatrix::<f64>::zeros(LEVELS, LEVELS);
+    if c >= 2 {
+        let mean: Vec<f64> = (0..LEVELS)
+            .map(|k| sol.grads.iter().map(|g| g[k]).sum::<f64>() / c as f64)
+            .collect();
+        for g in &sol.grads {
+            let v = DVector::from_fn(LEVELS, |k, _| {
+                if k == GAUGE && !sol.sums.hess.is_empty() {
+                    0.0
+                } else {
+                    g[k] - mean[k]
+                }
+            });
+            meat.ger(1.0, &v, &v, 1.0);
+        }
+        meat *= c as f64 / (c as f64 - 1.0);
+    }
+    let x = chol.solve(&meat);
+    let cov = chol.solve(&x.transpose());
+    // normalisation: U_n = 255 U / U(255); J = 255 / U255 (I - U e_255^T / U255)
+    let u = &sol.u;
+    let s = 255.0 / u[255];
+    let mut jac = DMatrix::<f64>::identity(LEVELS, LEVELS) * s;
+    for k in 0..LEVELS {
+        jac[(k, 255)] -= s * u[k] / u[255];
+    }
+    let cov_n = &jac * cov * jac.transpose();
+    // the prior's part
+    let (a10, b10) = u_system(&sol.u_prev, &sol.sums, penalty, sol.lambda * 0.1);
+    let (_, b1) = u_system(&sol.u_prev, &sol.sums, penalty, sol.lambda);
+    let d1 = chol.solve(&b1);
+    let d10 = a10.cholesky().ok_or_else(singular)?.solve(&b10);
+    let mut u1 = sol.u_prev;
+    let mut u10 = sol.u_prev;
+    for k in 0..LEVELS {
+        u1[k] += d1[k];
+        u10[k] += d10[k];
+    }
+    let (n1, n10) = (normalized(&u1), normalized(&u10));
+    let prior_part: Vec<f64> = (0..LEVELS)
+        .map(|k| (n10[k] - n1[k]).abs() / 0.9)
+        .collect();
+    let total = (0..LEVELS)
+        .map(|k| (cov_n[(k, k)].max(0.0) + prior_part[k] * prior_part[k]).sqrt())
+        .collect();
+    Ok((total, prior_part))
 }
 
 /// Calibrates the inverse response from `frames` (8-bit grey, all the same size) taken at
 /// `exposures_ms`. Frames are modified in place (saturated neighbourhoods set to 255).
-/// `progress` is called after every iteration with the iteration number and energy.
+/// `progress` is called after every iteration with the iteration number and the largest
+/// change of `U` in grey levels.
 pub fn calibrate_response(
     frames: &mut [Image<u8>],
     exposures_ms: &[f64],
@@ -247,181 +1105,136 @@ pub fn calibrate_response(
             });
         }
     }
+    let mut distinct: Vec<f64> = exposures_ms.to_vec();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
+    if distinct.len() < 3 {
+        return Err(PhotometricError::Calibration(format!(
+            "only {} different exposure times: two exposures determine U only up to a periodic factor; record at least 3 (the paper: 120 from 0.05 to 20 ms)",
+            distinct.len()
+        )));
+    }
+    let log_gap = distinct
+        .windows(2)
+        .map(|p| (p[1] / p[0]).ln())
+        .fold(0.0f64, f64::max);
     frames
         .par_iter_mut()
         .for_each(|f| mask_saturation(f.data_mut(), w, h, options.saturation_border));
+    let frames: &[Image<u8>] = frames;
 
-    let npx = w * h;
-    let censor = options.censor_level.min(254) as usize;
-    // histogram of usable observations
-    let histogram: Vec<u64> = frames
-        .par_iter()
-        .map(|f| {
-            let mut c = vec![0u64; 256];
-            for &v in f.data() {
-                c[v as usize] += 1;
+    let histogram: Vec<u64> = {
+        let parts: Vec<Vec<u64>> = frames
+            .par_iter()
+            .map(|f| {
+                let mut c = vec![0u64; LEVELS];
+                for &v in f.data() {
+                    c[v as usize] += 1;
+                }
+                c
+            })
+            .collect();
+        let mut total = vec![0u64; LEVELS];
+        for p in parts {
+            for k in 0..LEVELS {
+                total[k] += p[k];
             }
-            c
-        })
-        .reduce(
-            || vec![0u64; 256],
-            |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect(),
-        );
-    let mut observed = [false; 256];
-    for k in 0..255 {
-        observed[k] = histogram[k] >= options.min_count.max(1);
-    }
-    let lo = (0..255).find(|&k| observed[k]);
-    let hi = (0..255).rev().find(|&k| observed[k]);
-    let (Some(lo), Some(hi)) = (lo, hi) else {
+        }
+        total
+    };
+    let min_count = options.min_count.max(1);
+    let lo_obs = (0..255).find(|&k| histogram[k] >= min_count);
+    let hi_obs = (0..255).rev().find(|&k| histogram[k] >= min_count);
+    let (Some(lo_obs), Some(hi_obs)) = (lo_obs, hi_obs) else {
         return Err(PhotometricError::Calibration(
             "no unsaturated pixel in any frame".into(),
         ));
     };
-    if hi - lo < 16 {
+    if hi_obs - lo_obs < 16 {
         return Err(PhotometricError::Calibration(format!(
-            "only grey values {lo}..{hi} are observed; the scene needs a wider range of brightness (dark pixels and bright ones)"
+            "only grey values {lo_obs}..{hi_obs} are observed; the scene needs a wider range of brightness (dark pixels and bright ones)"
         )));
     }
 
-    let mut u = [0.0f64; 256];
-    for (k, v) in u.iter_mut().enumerate() {
-        *v = k as f64;
+    let penalty = third_difference_normal();
+    let solver = Solver {
+        frames,
+        exposures: exposures_ms,
+        options,
+        penalty,
+        log_gap,
+    };
+    let sol = solver.run(progress)?;
+
+    // what the data determine
+    let used = sol.sums.used.clone();
+    let determined: Vec<bool> = (0..LEVELS)
+        .map(|k| {
+            let a = k.saturating_sub(1);
+            let b = (k + 1).min(255);
+            (a..=b).map(|j| used[j]).sum::<u64>() >= min_count
+        })
+        .collect();
+    let k_lo = (0..LEVELS).find(|&k| determined[k]).unwrap_or(0);
+    let k_hi = (0..LEVELS).rev().find(|&k| determined[k]).unwrap_or(255);
+    let filled: Vec<u8> = (0..LEVELS)
+        .filter(|&k| !determined[k])
+        .map(|k| k as u8)
+        .collect();
+    if k_hi < 192 {
+        return Err(PhotometricError::Calibration(format!(
+            "the data determine U only up to grey value {k_hi}: no pixel is predicted brighter without saturating; record longer exposures or a brighter scene so that grey values up to about 250 are observed"
+        )));
     }
-    let mut b = vec![0f32; npx];
-    let rows_per_chunk = (16384 / w.max(1)).max(1);
-    let mut energy_hist = Vec::new();
-    let mut prev_energy = f64::INFINITY;
-    let mut iterations = 0;
-    let mut converged = false;
-    let total_obs: u64 = histogram[..255].iter().sum();
-    let lambda = options.smoothness * total_obs as f64 / 255.0;
-    loop {
-        iterations += 1;
-        // B' step (eq. 8), from uncensored observations only
-        b.par_chunks_mut(rows_per_chunk * w)
-            .enumerate()
-            .for_each(|(ci, bchunk)| {
-                let start = ci * rows_per_chunk * w;
-                let mut num = vec![0f64; bchunk.len()];
-                let mut den = vec![0f64; bchunk.len()];
-                for (f, &t) in frames.iter().zip(exposures_ms) {
-                    let px = &f.data()[start..start + bchunk.len()];
-                    for ((&k, nu), de) in px.iter().zip(num.iter_mut()).zip(den.iter_mut()) {
-                        let k = k as usize;
-                        if k <= censor {
-                            *nu += t * u[k];
-                            *de += t * t;
-                        }
-                    }
-                }
-                for ((o, nu), de) in bchunk.iter_mut().zip(&num).zip(&den) {
-                    *o = if *de > 0.0 {
-                        (nu / de) as f32
-                    } else {
-                        f32::NAN
-                    };
-                }
-            });
-        // U step (eq. 7) and the energy with the U of this iteration
-        let (sum, cnt, energy) = frames
-            .par_iter()
-            .zip(exposures_ms)
-            .map(|(f, &t)| {
-                let mut s = vec![0f64; 256];
-                let mut c = vec![0f64; 256];
-                let mut e = 0.0;
-                for (&k, &bx) in f.data().iter().zip(&b) {
-                    if k == 255 || bx.is_nan() {
-                        continue;
-                    }
-                    let tb = t * bx as f64;
-                    s[k as usize] += tb;
-                    c[k as usize] += 1.0;
-                    let r = u[k as usize] - tb;
-                    e += r * r;
-                }
-                (s, c, e)
-            })
-            .reduce(
-                || (vec![0f64; 256], vec![0f64; 256], 0.0),
-                |a, b| {
-                    (
-                        a.0.iter().zip(&b.0).map(|(x, y)| x + y).collect(),
-                        a.1.iter().zip(&b.1).map(|(x, y)| x + y).collect(),
-                        a.2 + b.2,
-                    )
-                },
-            );
-        let mut new_u = u;
-        if lambda > 0.0 {
-            // (diag(cnt) + lambda D^T D) U = sum, D the second difference over 0..254
-            let m = 255;
-            let mut a = vec![vec![0.0; m]; m];
-            let mut rhs = vec![0.0; m];
-            for (k, row) in a.iter_mut().enumerate() {
-                row[k] += cnt[k];
-            }
-            rhs.copy_from_slice(&sum[..m]);
-            for k in 1..m - 1 {
-                let idx = [k - 1, k, k + 1];
-                let coef = [1.0, -2.0, 1.0];
-                for (i, &r) in idx.iter().enumerate() {
-                    for (j, &c) in idx.iter().enumerate() {
-                        a[r][c] += lambda * coef[i] * coef[j];
-                    }
-                }
-            }
-            if let Some(x) = solve_dense(a, rhs) {
-                new_u[..m].copy_from_slice(&x);
-            }
-        } else {
-            for k in 0..255 {
-                if cnt[k] > 0.0 {
-                    new_u[k] = sum[k] / cnt[k];
-                }
-            }
-        }
-        // fix the gauge U(hi) = hi, so that energies of successive iterations compare
-        let s = if new_u[hi] > 0.0 {
-            hi as f64 / new_u[hi]
-        } else {
-            1.0
-        };
-        for v in new_u.iter_mut() {
-            *v *= s;
-        }
-        for v in b.iter_mut() {
-            *v *= s as f32;
-        }
-        u = new_u;
-        energy_hist.push(energy);
-        progress(iterations, energy);
-        let rel = (prev_energy - energy).abs() / energy.max(1e-300);
-        if rel < options.tolerance {
-            converged = true;
-            break;
-        }
-        if iterations >= options.max_iterations {
-            break;
-        }
-        prev_energy = energy;
+    if k_lo > 64 {
+        return Err(PhotometricError::Calibration(format!(
+            "the data determine U only from grey value {k_lo} up: record shorter exposures or a darker scene so that grey values near 0 are observed"
+        )));
     }
-    let filled = fill_and_make_monotone(&mut u, &observed);
-    // U(255) is never observed: it was extrapolated with the other unobserved values
-    let s = 255.0 / u[255];
-    let u = u.map(|v| v * s);
-    let response = InverseResponse::new(u)?;
-    let rmse = (energy_hist.last().copied().unwrap_or(0.0) / total_obs.max(1) as f64).sqrt() * s;
-    let energy_hist = energy_hist.iter().map(|e| e * s * s).collect();
+    let mut warnings = Vec::new();
+    if k_hi < 240 {
+        warnings.push(format!(
+            "U above grey value {k_hi} is extrapolated ({} values): longer exposures would determine it",
+            255 - k_hi
+        ));
+    }
+    if k_lo > 16 {
+        warnings.push(format!(
+            "U below grey value {k_lo} is extrapolated: shorter exposures would determine it"
+        ));
+    }
+    if distinct.len() < 8 {
+        warnings.push(format!(
+            "only {} different exposures: U between them leans on the smoothness prior",
+            distinct.len()
+        ));
+    }
+    if !sol.converged {
+        warnings.push(format!(
+            "not converged after {} iterations (last change {:.3} grey levels)",
+            sol.iterations,
+            sol.change.last().copied().unwrap_or(f64::NAN)
+        ));
+    }
+    let (std_error, prior_error) = standard_errors(&sol, &solver.penalty)?;
+    let response = InverseResponse::new(normalized(&sol.u))?;
+    let rmse = (sol.sums.rss.iter().sum::<f64>() / sol.sums.cnt.iter().sum::<f64>().max(1.0)).sqrt();
     Ok(ResponseCalibration {
         response,
-        iterations,
-        converged,
+        std_error,
+        prior_error,
+        iterations: sol.iterations,
+        converged: sol.converged,
+        change: sol.change,
         rmse,
-        observed_range: (lo as u8, hi as u8),
-        filled: filled.into_iter().filter(|&k| k != 255).collect(),
+        observed_range: (k_lo as u8, k_hi as u8),
+        filled,
         histogram,
-        energy: energy_hist,
+        used,
+        censor_range: (sol.lo, sol.hi),
+        noise: sol.noise,
+        prior_weight: sol.prior,
+        pixels_used: sol.sums.pixels,
+        warnings,
     })
 }

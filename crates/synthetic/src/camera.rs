@@ -1,5 +1,9 @@
-//! Ground-truth photometric and geometric camera: a FOV lens, a non-gamma response, a vignette
-//! that is not radially symmetric, sensor noise and saturation.
+//! Ground-truth photometric and geometric camera: a FOV lens, camera responses (the default
+//! one is not a gamma curve), and a vignette that is not radially symmetric. The sensor noise
+//! is in [`crate::sensor`].
+
+use std::fmt;
+use std::str::FromStr;
 
 use crate::Rng;
 
@@ -98,15 +102,110 @@ impl FovCamera {
 /// The ground-truth inverse response `U(0..255)` with `U(255) = 255`: a smooth, strictly
 /// increasing curve that is not a gamma curve (a toe, a linear middle and a shoulder).
 pub fn ground_truth_response() -> [f64; 256] {
-    let mut u = [0.0; 256];
-    for (k, v) in u.iter_mut().enumerate() {
-        let x = k as f64 / 255.0;
-        *v = 0.55 * x.powf(1.9)
-            + 0.3 * x
-            + 0.15 * (1.0 - (-3.0 * x).exp()) / (1.0 - (-3.0f64).exp());
+    ResponseCurve::Dataset.table()
+}
+
+/// Inverse response curves of real kinds of cameras, for judging calibrations on more than
+/// one shape. Each is smooth and strictly increasing with `U(0) = 0` and `U(255) = 255`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ResponseCurve {
+    /// The default ground truth ([`ground_truth_response`]): a toe, a linear middle and a
+    /// shoulder; not a gamma curve.
+    Dataset,
+    /// The sRGB transfer curve (a linear toe and a 2.4 power).
+    Srgb,
+    /// A log-encoding camera: `U(x) = ((1 + a)^x - 1) / a` with `a = 30` (strongly convex).
+    Log,
+    /// Linear up to 70% of the range, then a highlight knee that compresses the brightest
+    /// third of the irradiances.
+    Knee,
+    /// A pure power `U(x) = x^gamma`.
+    Gamma(f64),
+}
+
+impl ResponseCurve {
+    /// Every named curve (and a gamma of 1.8).
+    pub const ALL: [ResponseCurve; 5] = [
+        ResponseCurve::Dataset,
+        ResponseCurve::Srgb,
+        ResponseCurve::Log,
+        ResponseCurve::Knee,
+        ResponseCurve::Gamma(1.8),
+    ];
+
+    /// The normalised inverse response at `x` in `[0, 1]` (`U(0) = 0`, `U(1) = 1`).
+    pub fn inverse(self, x: f64) -> f64 {
+        let x = x.clamp(0.0, 1.0);
+        let raw = |x: f64| match self {
+            ResponseCurve::Dataset => {
+                0.55 * x.powf(1.9)
+                    + 0.3 * x
+                    + 0.15 * (1.0 - (-3.0 * x).exp()) / (1.0 - (-3.0f64).exp())
+            }
+            ResponseCurve::Srgb => {
+                if x <= 0.04045 {
+                    x / 12.92
+                } else {
+                    ((x + 0.055) / 1.055).powf(2.4)
+                }
+            }
+            ResponseCurve::Log => (31f64.powf(x) - 1.0) / 30.0,
+            ResponseCurve::Knee => {
+                let k = (x - 0.7).max(0.0);
+                x + 2.2 * k * k
+            }
+            ResponseCurve::Gamma(g) => x.powf(g.max(0.05)),
+        };
+        raw(x) / raw(1.0)
     }
-    let s = 255.0 / u[255];
-    u.map(|v| v * s)
+
+    /// The table `U(0) .. U(255)`, scaled to `U(255) = 255`.
+    pub fn table(self) -> [f64; 256] {
+        let mut u = [0.0; 256];
+        for (k, v) in u.iter_mut().enumerate() {
+            *v = 255.0 * self.inverse(k as f64 / 255.0);
+        }
+        u
+    }
+
+    /// The curve's name as used on command lines.
+    pub fn name(self) -> String {
+        match self {
+            ResponseCurve::Dataset => "dataset".into(),
+            ResponseCurve::Srgb => "srgb".into(),
+            ResponseCurve::Log => "log".into(),
+            ResponseCurve::Knee => "knee".into(),
+            ResponseCurve::Gamma(g) => format!("gamma{g}"),
+        }
+    }
+}
+
+impl fmt::Display for ResponseCurve {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+impl FromStr for ResponseCurve {
+    type Err = String;
+
+    /// `dataset`, `srgb`, `log`, `knee` or `gammaG` (for example `gamma2.2`).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let t = s.trim().to_ascii_lowercase();
+        match t.as_str() {
+            "dataset" => Ok(ResponseCurve::Dataset),
+            "srgb" => Ok(ResponseCurve::Srgb),
+            "log" => Ok(ResponseCurve::Log),
+            "knee" => Ok(ResponseCurve::Knee),
+            _ => match t.strip_prefix("gamma").map(str::parse::<f64>) {
+                Some(Ok(g)) if g.is_finite() && g > 0.05 && g < 20.0 => Ok(ResponseCurve::Gamma(g)),
+                _ => Err(format!(
+                    "unknown response curve `{}`: expected dataset, srgb, log, knee or gammaG (for example gamma2.2)",
+                    s.trim()
+                )),
+            },
+        }
+    }
 }
 
 /// The camera response `G = U^-1` as a continuous value in `[0, 255]` (before noise and
@@ -148,33 +247,4 @@ pub fn ground_truth_vignette(width: usize, height: usize, seed: u64) -> Vec<f32>
     }
     let max = v.iter().copied().fold(0.0, f64::max);
     v.into_iter().map(|x| (x / max) as f32).collect()
-}
-
-/// Sensor model: photon-like noise whose variance grows with the signal, read noise, and
-/// quantisation through the response, saturating at 255.
-#[derive(Clone, Copy, Debug)]
-pub struct Sensor {
-    /// Standard deviation of the read noise, in units of `U`.
-    pub read_noise: f64,
-    /// Shot-noise factor: standard deviation `shot * sqrt(energy)`, in units of `U`.
-    pub shot: f64,
-}
-
-impl Default for Sensor {
-    fn default() -> Self {
-        Sensor {
-            read_noise: 0.4,
-            shot: 0.08,
-        }
-    }
-}
-
-impl Sensor {
-    /// The grey value observed for `energy = t V B` (in units of `U`).
-    pub fn observe(&self, u: &[f64; 256], energy: f64, rng: &mut Rng) -> u8 {
-        let sigma =
-            (self.read_noise * self.read_noise + self.shot * self.shot * energy.max(0.0)).sqrt();
-        let e = energy + sigma * rng.normal();
-        response_value(u, e).round().clamp(0.0, 255.0) as u8
-    }
 }

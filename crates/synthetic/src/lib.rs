@@ -1,9 +1,9 @@
 //! Synthetic data with known ground truth for every monovo stage, always from a fixed seed:
 //! benchmark-like camera paths and drifted VO estimates ([`trajectory`]), whole synthetic
 //! benchmark results of several methods ([`results`]), the ground-truth camera, response,
-//! vignette and sensor ([`camera`]), marker-plane vignette data ([`plane`]), rendered sequences and exposure sweeps ([`scene`]), and a
-//! seedable
-//! random number generator ([`Rng`]) that gives the same data on every platform.
+//! and vignette ([`camera`]), a realistic sensor with shot, read and ADC noise, saturation,
+//! defects and JPEG ([`sensor`]), marker-plane vignette data ([`plane`]), rendered sequences
+//! and exposure sweeps ([`scene`]), and a seedable random number generator ([`Rng`]) that gives the same data on every platform.
 //!
 //! # Example
 //!
@@ -27,6 +27,7 @@ pub mod plane;
 pub mod results;
 mod rng;
 pub mod scene;
+pub mod sensor;
 pub mod trajectory;
 
 pub use rng::Rng;

@@ -3,9 +3,8 @@
 //! through the FOV camera with the ground-truth vignette, response, random exposures and
 //! noise. The true poses are available in `monovo calib vignette --poses` format.
 
-use rayon::prelude::*;
-
-use crate::camera::{ground_truth_response, ground_truth_vignette, FovCamera, Sensor};
+use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
+use crate::sensor::Sensor;
 use crate::scene::texture;
 use crate::trajectory::{mat_vec, Mat3, Vec3};
 use crate::Rng;
@@ -47,8 +46,10 @@ pub struct PlaneConfig {
     pub frames: usize,
     /// Marker id.
     pub marker_id: u16,
-    /// Sensor noise.
+    /// The sensor (noise, saturation, defects, compression).
     pub sensor: Sensor,
+    /// The camera response.
+    pub response: ResponseCurve,
 }
 
 impl Default for PlaneConfig {
@@ -59,6 +60,7 @@ impl Default for PlaneConfig {
             frames: 150,
             marker_id: 213,
             sensor: Sensor::default(),
+            response: ResponseCurve::Dataset,
         }
     }
 }
@@ -140,7 +142,7 @@ impl PlaneSequence {
             camera: FovCamera::dataset(config.width, config.height),
             poses,
             exposures_ms,
-            response: ground_truth_response(),
+            response: config.response.table(),
             vignette: ground_truth_vignette(config.width, config.height, seed ^ 0x5eed),
             config,
             seed,
@@ -164,7 +166,7 @@ impl PlaneSequence {
         }
     }
 
-    /// Renders frame `i` (2x2 supersampled) as 8-bit grey.
+    /// Renders frame `i` (2x2 supersampled) as 8-bit grey, before compression.
     pub fn render(&self, i: usize) -> Vec<u8> {
         let (w, h) = (self.config.width, self.config.height);
         let pose = self.poses[i];
@@ -172,10 +174,13 @@ impl PlaneSequence {
         // plane normal and offset in the camera frame
         let n = [pose.r[0][2], pose.r[1][2], pose.r[2][2]];
         let nt = n[0] * pose.t[0] + n[1] * pose.t[1] + n[2] * pose.t[2];
-        let mut out = vec![0u8; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut rng = Rng::derive(self.seed ^ 0x9A9A ^ (i as u64) << 20, y as u64);
-            for (x, px) in row.iter_mut().enumerate() {
+        self.config.sensor.capture(
+            &self.response,
+            w,
+            h,
+            t,
+            self.seed ^ 0x9A9A ^ (i as u64) << 20,
+            |x, y| {
                 let mut rad = 0.0;
                 for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
                     rad += 0.25
@@ -204,11 +209,15 @@ impl PlaneSequence {
                             None => 0.05,
                         };
                 }
-                let e = GAIN * t * self.vignette[y * w + x] as f64 * rad;
-                *px = self.config.sensor.observe(&self.response, e, &mut rng);
-            }
-        });
-        out
+                GAIN * t * self.vignette[y * w + x] as f64 * rad
+            },
+        )
+    }
+
+    /// Frame `i` as stored by the camera (after the sensor's JPEG compression, if any).
+    pub fn frame(&self, i: usize) -> Result<Vec<u8>, image::ImageError> {
+        let (w, h) = (self.config.width, self.config.height);
+        self.config.sensor.store(w, h, self.render(i))
     }
 
     /// The true poses in `--poses` format: `id r11 .. r33 tx ty tz` per frame.

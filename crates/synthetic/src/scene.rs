@@ -3,7 +3,8 @@
 
 use rayon::prelude::*;
 
-use crate::camera::{ground_truth_response, ground_truth_vignette, FovCamera, Sensor};
+use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
+use crate::sensor::Sensor;
 use crate::trajectory::{benchmark_path, mat_vec, Mat3, Path, PathConfig, Vec3};
 use crate::Rng;
 
@@ -124,8 +125,10 @@ pub struct SequenceConfig {
     pub frames: usize,
     /// Frame rate.
     pub fps: f64,
-    /// Sensor noise.
+    /// The sensor (noise, saturation, defects, compression).
     pub sensor: Sensor,
+    /// The camera response.
+    pub response: ResponseCurve,
 }
 
 impl Default for SequenceConfig {
@@ -136,6 +139,7 @@ impl Default for SequenceConfig {
             frames: 300,
             fps: 25.0,
             sensor: Sensor::default(),
+            response: ResponseCurve::Dataset,
         }
     }
 }
@@ -193,32 +197,34 @@ impl SyntheticSequence {
             path,
             room,
             exposures_ms,
-            response: ground_truth_response(),
+            response: config.response.table(),
             vignette: ground_truth_vignette(config.width, config.height, seed),
             config,
             seed,
         }
     }
 
-    /// Renders frame `i` as 8-bit grey, row-major.
+    /// Renders frame `i` as 8-bit grey, row-major, before compression (the sensor's
+    /// `jpeg_quality` is applied by whoever stores it).
     pub fn render(&self, i: usize) -> Vec<u8> {
         let (w, h) = (self.config.width, self.config.height);
         let r: Mat3 = self.path.rotations[i];
         let origin = self.path.positions[i];
         let t = self.exposures_ms[i];
-        let mut out = vec![0u8; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut rng = Rng::derive(self.seed ^ (i as u64) << 20, y as u64);
-            for (x, px) in row.iter_mut().enumerate() {
+        self.config.sensor.capture(
+            &self.response,
+            w,
+            h,
+            t,
+            self.seed ^ (i as u64) << 20,
+            |x, y| {
                 let rad = match self.camera.unproject(x as f64, y as f64) {
                     Some(ray) => self.room.radiance(origin, mat_vec(&r, ray)),
                     None => 0.0,
                 };
-                let energy = GAIN * t * self.vignette[y * w + x] as f64 * rad;
-                *px = self.config.sensor.observe(&self.response, energy, &mut rng);
-            }
-        });
-        out
+                GAIN * t * self.vignette[y * w + x] as f64 * rad
+            },
+        )
     }
 
     /// times.txt rows: `(id, timestamp, exposure_ms)`.
@@ -226,6 +232,41 @@ impl SyntheticSequence {
         (0..self.config.frames)
             .map(|i| (format!("{i:05}"), self.path.times[i], self.exposures_ms[i]))
             .collect()
+    }
+}
+
+/// Settings of an exposure sweep.
+#[derive(Clone, Copy, Debug)]
+pub struct SweepConfig {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Number of frames (exposures).
+    pub frames: usize,
+    /// Shortest exposure in ms.
+    pub t0: f64,
+    /// Exposure step factor between frames.
+    pub factor: f64,
+    /// The sensor.
+    pub sensor: Sensor,
+    /// The camera response.
+    pub response: ResponseCurve,
+}
+
+impl Default for SweepConfig {
+    /// The paper's sweep: 120 exposures from 0.05 ms in steps of 1.05, 640x512, the typical
+    /// sensor, the default response.
+    fn default() -> Self {
+        SweepConfig {
+            width: 640,
+            height: 512,
+            frames: 120,
+            t0: 0.05,
+            factor: 1.05,
+            sensor: Sensor::default(),
+            response: ResponseCurve::Dataset,
+        }
     }
 }
 
@@ -243,22 +284,22 @@ pub struct Sweep {
     pub exposures_ms: Vec<f64>,
     /// Ground-truth inverse response.
     pub response: [f64; 256],
-    /// Sensor noise.
+    /// The sensor.
     pub sensor: Sensor,
     seed: u64,
 }
 
 impl Sweep {
-    /// A sweep of `frames` exposures from `t0` ms in steps of `factor`, of a textured wall
-    /// seen through the vignetted camera.
-    pub fn new(
-        seed: u64,
-        width: usize,
-        height: usize,
-        frames: usize,
-        t0: f64,
-        factor: f64,
-    ) -> Sweep {
+    /// A sweep of a textured wall seen through the vignetted camera.
+    pub fn new(seed: u64, config: SweepConfig) -> Sweep {
+        let SweepConfig {
+            width,
+            height,
+            frames,
+            t0,
+            factor,
+            ..
+        } = config;
         let cam = FovCamera::dataset(width, height);
         let vig = ground_truth_vignette(width, height, seed);
         let room = Room {
@@ -269,7 +310,7 @@ impl Sweep {
         let r = crate::trajectory::camera_rotation(0.4, 0.1);
         let mut irradiance = vec![0.0; width * height];
         irradiance
-            .par_chunks_mut(width)
+            .par_chunks_mut(width.max(1))
             .enumerate()
             .for_each(|(y, row)| {
                 for (x, b) in row.iter_mut().enumerate() {
@@ -285,25 +326,27 @@ impl Sweep {
             height,
             irradiance,
             exposures_ms,
-            response: ground_truth_response(),
-            sensor: Sensor::default(),
+            response: config.response.table(),
+            sensor: config.sensor,
             seed,
         }
     }
 
-    /// Frame `i` as 8-bit grey.
+    /// Frame `i` as 8-bit grey, before compression.
     pub fn render(&self, i: usize) -> Vec<u8> {
         let t = self.exposures_ms[i];
-        let mut out = vec![0u8; self.width * self.height];
-        out.par_chunks_mut(self.width)
-            .enumerate()
-            .for_each(|(y, row)| {
-                let mut rng = Rng::derive(self.seed ^ 0xABCD ^ (i as u64) << 20, y as u64);
-                for (x, px) in row.iter_mut().enumerate() {
-                    let e = t * self.irradiance[y * self.width + x];
-                    *px = self.sensor.observe(&self.response, e, &mut rng);
-                }
-            });
-        out
+        self.sensor.capture(
+            &self.response,
+            self.width,
+            self.height,
+            t,
+            self.seed ^ 0xABCD ^ (i as u64) << 20,
+            |x, y| t * self.irradiance[y * self.width + x],
+        )
+    }
+
+    /// Frame `i` as stored by the camera (after the sensor's JPEG compression, if any).
+    pub fn frame(&self, i: usize) -> Result<Vec<u8>, image::ImageError> {
+        self.sensor.store(self.width, self.height, self.render(i))
     }
 }

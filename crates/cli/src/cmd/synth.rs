@@ -34,13 +34,63 @@ loses tracking more often, writes keyframes only and uses the 2e9 - t timestamps
     /// dataset's FOV camera with vignette, non-gamma response, auto exposure and noise, plus
     /// times.txt, camera.txt, pcalib.txt, vignette.png and groundtruthSync.txt (the truth).
     Sequence(SequenceArgs),
-    /// A response-calibration sweep: a static scene at exposures in steps of 1.05 (images.zip,
+    /// A response-calibration sweep: a static scene at exposures from 0.05 to 20 ms (images.zip,
     /// times.txt with exposures, camera.txt), and the true pcalib.txt as truth_pcalib.txt.
     Sweep(SweepArgs),
     /// A vignette-calibration set: a bright wall with ArUco marker 213 filmed from random poses
     /// (images.zip, times.txt, camera.txt, pcalib.txt), with the truth as poses.txt and
     /// truth_vignette.png.
     Vignette(VignetteArgs),
+}
+
+/// The synthetic camera's sensor, response and storage.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SensorArgs {
+    /// Sensor noise: low (full well 20,000 e-, read 3 e-), typical (10,000 e-, 5 e-) or high
+    /// (5,000 e-, 8 e-, 1 grey level of ADC noise); every level has shot, read and ADC noise,
+    /// full-well and 8-bit saturation, and hot and dead pixels.
+    #[arg(long, default_value = "typical", value_name = "LEVEL")]
+    pub noise: synthetic::sensor::NoiseLevel,
+    /// The true camera response: dataset (toe, linear middle, shoulder), srgb, log, knee or
+    /// gammaG (for example gamma2.2).
+    #[arg(long, default_value = "dataset", value_name = "CURVE")]
+    pub response: synthetic::camera::ResponseCurve,
+    /// JPEG quality of the stored frames (the dataset's are about 90).
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub quality: u8,
+    /// Store the frames losslessly as PNG instead of JPEG.
+    #[arg(long)]
+    pub png: bool,
+}
+
+impl SensorArgs {
+    /// The sensor these arguments describe.
+    pub fn sensor(&self) -> synthetic::sensor::Sensor {
+        let s = synthetic::sensor::Sensor::preset(self.noise);
+        if self.png {
+            s
+        } else {
+            s.with_jpeg(self.quality)
+        }
+    }
+
+    /// The extension of the stored frames.
+    fn ext(&self) -> &'static str {
+        if self.png {
+            "png"
+        } else {
+            "jpg"
+        }
+    }
+
+    /// Encodes a rendered frame as the camera stores it.
+    fn encode(&self, w: usize, h: usize, frame: &[u8]) -> Result<Vec<u8>> {
+        Ok(if self.png {
+            dataset_io::encode_png_u8(w, h, 1, frame, dataset_io::PngSpeed::Fast)?
+        } else {
+            dataset_io::encode_jpeg_gray(w, h, frame, self.quality)?
+        })
+    }
 }
 
 /// Arguments of `monovo synth vignette`.
@@ -58,9 +108,8 @@ pub struct VignetteArgs {
     /// Number of frames.
     #[arg(long, default_value_t = 150)]
     pub frames: usize,
-    /// Store frames as PNG instead of JPEG (quality 95).
-    #[arg(long)]
-    pub png: bool,
+    #[command(flatten)]
+    pub sensor: SensorArgs,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
@@ -79,18 +128,17 @@ pub fn write_vignette_set(
             width: w,
             height: h,
             frames: a.frames.max(1),
+            sensor: a.sensor.sensor(),
+            response: a.sensor.response,
             ..PlaneConfig::default()
         },
     );
-    let ext = if a.png { "png" } else { "jpg" };
-    write_frames(&out.file("images.zip")?, seq.poses.len(), ext, |i| {
-        let f = seq.render(i);
-        Ok(if a.png {
-            dataset_io::encode_png_u8(w, h, 1, &f, dataset_io::PngSpeed::Fast)?
-        } else {
-            dataset_io::encode_jpeg_gray(w, h, &f, 95)?
-        })
-    })?;
+    write_frames(
+        &out.file("images.zip")?,
+        seq.poses.len(),
+        a.sensor.ext(),
+        |i| a.sensor.encode(w, h, &seq.render(i)),
+    )?;
     let times: String = seq
         .exposures_ms
         .iter()
@@ -133,9 +181,8 @@ pub struct SequenceArgs {
     /// Number of frames.
     #[arg(long, default_value_t = 300)]
     pub frames: usize,
-    /// JPEG quality.
-    #[arg(long, default_value_t = 90)]
-    pub quality: u8,
+    #[command(flatten)]
+    pub sensor: SensorArgs,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
@@ -153,18 +200,20 @@ pub struct SweepArgs {
     /// Image size.
     #[arg(long, default_value = "640x512", value_name = "WxH")]
     pub size: camera_model::ImageSize,
-    /// Number of exposures (frames), each 1.05 times the previous.
+    /// Number of exposures (frames).
     #[arg(long, default_value_t = 120)]
     pub frames: usize,
     /// Shortest exposure in ms.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, value_name = "MS")]
     pub min_exposure: f64,
-    /// Exposure step factor.
-    #[arg(long, default_value_t = 1.05)]
-    pub step: f64,
-    /// Store frames as PNG instead of JPEG (no compression artefacts).
-    #[arg(long)]
-    pub png: bool,
+    /// Longest exposure in ms (the exposures are spaced evenly in log between the two).
+    #[arg(long, default_value_t = 20.0, value_name = "MS")]
+    pub max_exposure: f64,
+    /// Exposure step factor instead of --max-exposure (the paper's sweep: 1.05).
+    #[arg(long, value_name = "FACTOR")]
+    pub step: Option<f64>,
+    #[command(flatten)]
+    pub sensor: SensorArgs,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
@@ -273,17 +322,14 @@ pub fn write_sequence(
         width: a.size.width,
         height: a.size.height,
         frames: a.frames.max(8),
+        sensor: a.sensor.sensor(),
+        response: a.sensor.response,
         ..SequenceConfig::default()
     };
     let seq = SyntheticSequence::new(a.seed, cfg);
     let (w, h) = (cfg.width, cfg.height);
-    write_frames(&out.file("images.zip")?, cfg.frames, "jpg", |i| {
-        Ok(dataset_io::encode_jpeg_gray(
-            w,
-            h,
-            &seq.render(i),
-            a.quality,
-        )?)
+    write_frames(&out.file("images.zip")?, cfg.frames, a.sensor.ext(), |i| {
+        a.sensor.encode(w, h, &seq.render(i))
     })?;
     let times: String = seq
         .times()
@@ -317,22 +363,41 @@ pub fn write_sequence(
 
 /// Writes a synthetic response-calibration sweep into the folder `out`.
 pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::Sweep> {
-    use synthetic::scene::Sweep;
+    use synthetic::scene::{Sweep, SweepConfig};
     let (w, h) = (a.size.width, a.size.height);
-    let sweep = Sweep::new(a.seed, w, h, a.frames.max(2), a.min_exposure, a.step);
-    let ext = if a.png { "png" } else { "jpg" };
+    let frames = a.frames.max(2);
+    if !(a.min_exposure.is_finite() && a.min_exposure > 0.0) {
+        anyhow::bail!("--min-exposure must be a positive number of ms, got {}", a.min_exposure);
+    }
+    let factor = match a.step {
+        Some(s) if s.is_finite() && s > 1.0 => s,
+        Some(s) => anyhow::bail!("--step must be a factor above 1, got {s}"),
+        None if a.max_exposure.is_finite() && a.max_exposure > a.min_exposure => {
+            (a.max_exposure / a.min_exposure).powf(1.0 / (frames - 1) as f64)
+        }
+        None => anyhow::bail!(
+            "--max-exposure ({}) must be longer than --min-exposure ({})",
+            a.max_exposure,
+            a.min_exposure
+        ),
+    };
+    let sweep = Sweep::new(
+        a.seed,
+        SweepConfig {
+            width: w,
+            height: h,
+            frames,
+            t0: a.min_exposure,
+            factor,
+            sensor: a.sensor.sensor(),
+            response: a.sensor.response,
+        },
+    );
     write_frames(
         &out.file("images.zip")?,
         sweep.exposures_ms.len(),
-        ext,
-        |i| {
-            let f = sweep.render(i);
-            Ok(if a.png {
-                dataset_io::encode_png_u8(w, h, 1, &f, dataset_io::PngSpeed::Fast)?
-            } else {
-                dataset_io::encode_jpeg_gray(w, h, &f, 95)?
-            })
-        },
+        a.sensor.ext(),
+        |i| a.sensor.encode(w, h, &sweep.render(i)),
     )?;
     let times: String = sweep
         .exposures_ms

@@ -1,0 +1,189 @@
+//! The response stage of bench-synthetic: calibrations of synthetic exposure sweeps at every
+//! noise level, lossless and JPEG, large (the paper's 120 exposures) and small (12), against
+//! the truth, with the calibration of the standard errors.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use camera_model::Image;
+use synthetic::camera::ResponseCurve;
+use synthetic::scene::{Sweep, SweepConfig};
+use synthetic::sensor::{NoiseLevel, Sensor};
+
+use crate::stages::{peak_rss_mb, reset_peak_rss};
+use crate::Figure;
+
+/// One calibration of a synthetic sweep and its errors against the truth.
+pub struct RunResult {
+    /// Largest |U - U_true| over 0..254, both scaled to U(255) = 255.
+    pub max: f64,
+    /// RMS of the difference after the best scale.
+    pub rms: f64,
+    /// Wall time of the calibration (frames in memory).
+    pub seconds: f64,
+    /// Iterations.
+    pub iterations: usize,
+    /// Peak memory in MB.
+    pub peak_mb: f64,
+    /// Strictly increasing.
+    pub increasing: bool,
+    /// Values 0..254 whose error is within two standard errors, and how many had one.
+    pub within_2sigma: (usize, usize),
+}
+
+/// Calibrates a sweep of `frames` exposures from 0.05 to 20 ms.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    seed: u64,
+    width: usize,
+    height: usize,
+    frames: usize,
+    sensor: Sensor,
+    curve: ResponseCurve,
+    opts: &photometric::ResponseOptions,
+) -> Result<RunResult> {
+    let factor = (20.0f64 / 0.05).powf(1.0 / (frames - 1) as f64);
+    let sweep = Sweep::new(
+        seed,
+        SweepConfig {
+            width,
+            height,
+            frames,
+            t0: 0.05,
+            factor,
+            sensor,
+            response: curve,
+        },
+    );
+    let mut imgs: Vec<Image<u8>> = (0..frames)
+        .map(|i| Ok(Image::new(width, height, sweep.frame(i)?)?))
+        .collect::<Result<_>>()?;
+    reset_peak_rss();
+    let t = Instant::now();
+    let cal = photometric::calibrate_response(&mut imgs, &sweep.exposures_ms, opts, &|_, _| {})?;
+    let seconds = t.elapsed().as_secs_f64();
+    let u = cal.response.values();
+    let (max, rms) = cal.response.errors_against(&sweep.response);
+    let increasing = (1..256).all(|k| u[k] > u[k - 1]);
+    if std::env::var_os("MONOVO_DEBUG_ERR").is_some() {
+        for k in (0..256).step_by(8) {
+            eprintln!(
+                "    k {k:3} err {:+.4} std {:.4}",
+                u[k] - sweep.response[k],
+                cal.std_error.get(k).copied().unwrap_or(f64::NAN)
+            );
+        }
+    }
+    let within = (0..255)
+        .filter(|&k| cal.std_error.get(k).is_some_and(|s| *s > 0.0))
+        .fold((0, 0), |(a, n), k| {
+            let ok = (u[k] - sweep.response[k]).abs() <= 2.0 * cal.std_error[k];
+            (a + usize::from(ok), n + 1)
+        });
+    Ok(RunResult {
+        max,
+        rms,
+        seconds,
+        iterations: cal.iterations,
+        peak_mb: peak_rss_mb(),
+        increasing,
+        within_2sigma: within,
+    })
+}
+
+/// The configurations: every noise level lossless, and typical and high with JPEG 90.
+fn configs(quick: bool) -> Vec<(String, Sensor)> {
+    let mut v: Vec<(String, Sensor)> = NoiseLevel::ALL
+        .iter()
+        .map(|l| (l.name().to_string(), Sensor::preset(*l)))
+        .collect();
+    v.push((
+        "typical_jpeg".into(),
+        Sensor::preset(NoiseLevel::Typical).with_jpeg(90),
+    ));
+    v.push((
+        "high_jpeg".into(),
+        Sensor::preset(NoiseLevel::High).with_jpeg(90),
+    ));
+    if quick {
+        v.retain(|(n, _)| n == "low" || n == "high_jpeg");
+    }
+    v
+}
+
+/// The stage.
+pub fn stage(quick: bool) -> Result<Vec<Figure>> {
+    println!("stage response: synthetic exposure sweeps (0.05 to 20 ms) at every noise level");
+    let opts = photometric::ResponseOptions::default();
+    let (w, h, n) = if quick {
+        (640, 512, 60)
+    } else {
+        (1280, 1024, 120)
+    };
+    let mut figures = Vec::new();
+    let mut within = (0usize, 0usize);
+    println!(
+        "  {:<14} {:>16} {:>8} {:>8} {:>6} {:>5} {:>7} {:>8}",
+        "sensor", "sweep", "max", "rms", "s", "it", "MB", "in 2sd"
+    );
+    for (name, sensor) in configs(quick) {
+        for (sw, sh, sn, big) in [(w, h, n, true), (320, 256, 12, false)] {
+            let r = run(7, sw, sh, sn, sensor, ResponseCurve::Dataset, &opts)?;
+            println!(
+                "  {name:<14} {:>16} {:>8.3} {:>8.3} {:>6.1} {:>5} {:>7.0} {:>4}/{:<3}",
+                format!("{sw}x{sh}x{sn}"),
+                r.max,
+                r.rms,
+                r.seconds,
+                r.iterations,
+                r.peak_mb,
+                r.within_2sigma.0,
+                r.within_2sigma.1
+            );
+            within.0 += r.within_2sigma.0;
+            within.1 += r.within_2sigma.1;
+            if big {
+                figures.push(Figure::lower(
+                    &format!("response.{name}.max_error"),
+                    r.max,
+                    "grey",
+                ));
+                figures.push(Figure::lower(
+                    &format!("response.{name}.rms_error"),
+                    r.rms,
+                    "grey",
+                ));
+                if name == "high_jpeg" {
+                    figures.push(Figure::lower("response.seconds", r.seconds, "s"));
+                    let sweep_mb = (sw * sh * sn) as f64 / 1048576.0;
+                    figures.push(Figure::lower(
+                        "response.peak_memory_over_sweep",
+                        r.peak_mb / sweep_mb,
+                        "",
+                    ));
+                }
+            } else {
+                figures.push(Figure::lower(
+                    &format!("response.{name}.small_max_error"),
+                    r.max,
+                    "grey",
+                ));
+                figures.push(Figure::lower(
+                    &format!("response.{name}.small_not_increasing"),
+                    f64::from(u8::from(!r.increasing)),
+                    "",
+                ));
+            }
+        }
+    }
+    let frac = within.0 as f64 / within.1.max(1) as f64;
+    println!("  standard errors: {:.1}% of the true errors within 2 sigma", frac * 100.0);
+    figures.push(Figure {
+        key: "response.within_2sigma".into(),
+        value: frac,
+        unit: "",
+        lower_is_better: false,
+    });
+    figures.push(Figure::lower("response.within_2sigma_excess", frac, ""));
+    Ok(figures)
+}
