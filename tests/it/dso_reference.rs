@@ -461,3 +461,59 @@ pub fn invalid_pixels(cam: &Cam, k: [f64; 4], ow: usize, oh: usize, tol: f64) ->
     }
     n
 }
+
+/// DSO's reading of pcalib.txt (`PhotometricUndistorter`): the floats at the start of line 1
+/// (an `istream_iterator<float>`, which stops at the first character that does not continue
+/// a number); valid when there are at least 256 and they strictly increase. Returns the
+/// values, or why DSO refuses the file.
+pub fn read_pcalib(bytes: &[u8]) -> Result<Vec<f64>, &'static str> {
+    let line = bytes.split(|b| *b == b'\n').next().unwrap_or(&[]);
+    let mut rest = line;
+    let mut g = Vec::new();
+    while let Some((v, n)) = strtod(rest).filter(|(v, _)| v.is_finite()) {
+        g.push(v as f32 as f64);
+        rest = &rest[n..];
+    }
+    if g.len() < 256 {
+        return Err("fewer than 256 values in line 1");
+    }
+    if g.windows(2).any(|w| w[1] <= w[0]) {
+        return Err("G invalid! it has to be strictly increasing");
+    }
+    Ok(g)
+}
+
+/// DSO's normalisation of a valid response: `255 (G - G[0]) / (G[last] - G[0])`.
+pub fn normalise_pcalib(g: &[f64]) -> Vec<f64> {
+    let (a, b) = (g[0], g[g.len() - 1]);
+    g.iter().map(|v| 255.0 * (v - a) / (b - a)).collect()
+}
+
+/// DSO's reading of times.txt: per line `%d %lf %f` (3 conversions: timestamp and exposure)
+/// or `%d %lf` (exposure 0); other lines are skipped. Returns (timestamp, exposure ms).
+pub fn read_times(bytes: &[u8]) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    for line in bytes.split(|b| *b == b'\n') {
+        // "%d": an integer (its value is unused)
+        let mut i = 0;
+        while i < line.len() && line[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        if i < line.len() && (line[i] == b'+' || line[i] == b'-') {
+            i += 1;
+        }
+        let d0 = i;
+        while i < line.len() && line[i].is_ascii_digit() {
+            i += 1;
+        }
+        if i == d0 {
+            continue;
+        }
+        let Some((t, n)) = strtod(&line[i..]) else {
+            continue;
+        };
+        let e = strtod(&line[i + n..]).map_or(0.0, |(e, _)| e as f32 as f64);
+        out.push((t, e));
+    }
+    out
+}

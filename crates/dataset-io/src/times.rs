@@ -1,7 +1,8 @@
 //! `times.txt`: one line per image, `id timestamp_s exposure_ms`; two columns mean unknown
 //! exposure. Read like DSO reads it (`%d %lf %f`): columns after the third are ignored, and
 //! so are a UTF-8 byte-order mark and CRLF line ends. A file of one column (KITTI's
-//! `times.txt`: timestamps only, which DSO skips line by line) is read as timestamps.
+//! `times.txt`: timestamps only, which DSO misreads: `1.037359e-01` becomes id 1 and
+//! timestamp `.037359e-01`) is read as timestamps.
 
 use std::path::Path;
 
@@ -144,7 +145,7 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
     }
     if columns == Some(1) {
         warnings.push(format!(
-            "{}: one column: read as timestamps in seconds (KITTI's times.txt), exposures unknown; DSO skips such lines and plays without timestamps",
+            "{}: one column: read as timestamps in seconds (KITTI's times.txt), exposures unknown; DSO misreads such a file (the digits before the '.' as the id, the rest as the timestamp)",
             path.display()
         ));
     }
