@@ -1,4 +1,6 @@
 //! Cross-crate integration tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod dso_corpus;
+mod dso_reference;
 mod rectify_roundtrip;

@@ -14,6 +14,14 @@
 //! `cx_px = cx * w - 0.5`), else absolute pixels. Line 2 is the input size `w h`. Line 3 the
 //! output camera: `crop`, `full`, `none` or an explicit pinhole `fx fy cx cy 0`. Line 4 the
 //! output size. When lines 3 and 4 are both absent the output is `crop` at the input size.
+//!
+//! The file is read as DSO reads it (`src/util/Undistort.cpp`): lines after line 4 are
+//! ignored (stereo forks put a baseline there), numbers are read like C's `sscanf` (a model
+//! name followed by more numbers than it needs uses the first ones, a legacy line of 6 or 7
+//! numbers is FOV by its 5th), and `none` passes the raw image through. Where DSO crashes or
+//! is undefined (CRLF on line 3, 9 numbers on a RadTan line, a missing line 4) monovo reads
+//! the sensible thing or says what is wrong; [`CameraFile::warnings`] lists every difference
+//! from a plain 4-line file.
 
 use std::fmt;
 use std::str::FromStr;
@@ -125,6 +133,17 @@ impl FromStr for OutputMode {
 }
 
 fn parse_output_line(s: &str, line: usize) -> Result<OutputMode, CameraError> {
+    parse_output_line_noted(s, line, &mut Vec::new())
+}
+
+/// Line 3: `crop`, `full`, `none` (any case, surrounding blanks and a CR allowed) or an
+/// explicit pinhole. DSO reads 5 numbers and ignores the 5th and anything after it; monovo
+/// does the same, also accepts 4 numbers, and notes what it ignored.
+fn parse_output_line_noted(
+    s: &str,
+    line: usize,
+    notes: &mut Vec<String>,
+) -> Result<OutputMode, CameraError> {
     let t = s.trim();
     match t.to_ascii_lowercase().as_str() {
         "crop" => return Ok(OutputMode::Crop),
@@ -133,13 +152,27 @@ fn parse_output_line(s: &str, line: usize) -> Result<OutputMode, CameraError> {
         _ => {}
     }
     let expected = "`crop`, `full`, `none` or an explicit pinhole `fx fy cx cy 0`";
-    let nums = parse_numbers(t, line, expected)?;
-    if !(nums.len() == 4 || (nums.len() == 5 && nums[4] == 0.0)) {
+    let scan = scan_numbers(t, line, t)?;
+    let nums = &scan.values;
+    if nums.len() < 4 {
         return Err(CameraError::Parse {
             line,
             expected: expected.into(),
             found: t.into(),
         });
+    }
+    check_finite(&nums[..nums.len().min(5)], line)?;
+    if nums.len() >= 5 && nums[4] != 0.0 {
+        notes.push(format!(
+            "line {line}: the 5th number of the output pinhole ({}) is ignored, as DSO ignores it",
+            nums[4]
+        ));
+    }
+    if nums.len() > 5 || !scan.rest.is_empty() {
+        notes.push(format!(
+            "line {line}: `{}` after `fx fy cx cy 0` is ignored, as DSO ignores it",
+            scan.after(5)
+        ));
     }
     if nums[0] <= 0.0 || nums[1] <= 0.0 {
         return Err(CameraError::InvalidValue {
@@ -153,39 +186,146 @@ fn parse_output_line(s: &str, line: usize) -> Result<OutputMode, CameraError> {
     Ok(OutputMode::Pinhole([nums[0], nums[1], nums[2], nums[3]]))
 }
 
-fn parse_numbers(t: &str, line: usize, expected: &str) -> Result<Vec<f64>, CameraError> {
-    t.split_whitespace()
-        .map(|tok| {
-            let v = tok.parse::<f64>().map_err(|_| CameraError::Parse {
-                line,
-                expected: expected.into(),
-                found: t.into(),
-            })?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(CameraError::InvalidValue {
-                    line,
-                    message: format!("`{tok}` is not a finite number"),
-                })
-            }
-        })
-        .collect()
+/// The numbers at the start of a text as C's `sscanf("%f %f ...")` reads them: white-space
+/// separated, reading stops at the first token that is not a number; a token with a number
+/// followed by other characters (`-0.11,`) gives its number and stops the reading. A decimal
+/// comma (`0,5`) is an error rather than a silent 0.
+struct Scan<'a> {
+    values: Vec<f64>,
+    /// Tokens of each value, to quote what was ignored.
+    tokens: Vec<&'a str>,
+    /// What follows the last value read (trimmed; empty when the line ended).
+    rest: &'a str,
 }
 
-fn parse_size_line(t: &str, line: usize, what: &str) -> Result<ImageSize, CameraError> {
+impl Scan<'_> {
+    /// The text after the first `n` values (values and the unread rest), for messages.
+    fn after(&self, n: usize) -> String {
+        let mut parts: Vec<&str> = self.tokens.iter().skip(n).copied().collect();
+        if !self.rest.is_empty() {
+            parts.push(self.rest);
+        }
+        parts.join(" ")
+    }
+}
+
+/// Length of the longest prefix of `tok` that C's `strtod` would read as a decimal number.
+fn numeric_prefix_len(tok: &str) -> usize {
+    let b = tok.as_bytes();
+    let mut i = 0;
+    if i < b.len() && (b[i] == b'+' || b[i] == b'-') {
+        i += 1;
+    }
+    let int_start = i;
+    while i < b.len() && b[i].is_ascii_digit() {
+        i += 1;
+    }
+    let mut digits = i - int_start;
+    if i < b.len() && b[i] == b'.' {
+        let frac_start = i + 1;
+        let mut j = frac_start;
+        while j < b.len() && b[j].is_ascii_digit() {
+            j += 1;
+        }
+        digits += j - frac_start;
+        if digits > 0 {
+            i = j;
+        }
+    }
+    if digits == 0 {
+        return 0;
+    }
+    if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+        let mut j = i + 1;
+        if j < b.len() && (b[j] == b'+' || b[j] == b'-') {
+            j += 1;
+        }
+        let exp_start = j;
+        while j < b.len() && b[j].is_ascii_digit() {
+            j += 1;
+        }
+        if j > exp_start {
+            i = j;
+        }
+    }
+    i
+}
+
+fn scan_numbers<'a>(text: &'a str, line: usize, whole: &str) -> Result<Scan<'a>, CameraError> {
+    let mut values = Vec::new();
+    let mut tokens = Vec::new();
+    let mut rest = text.trim_start();
+    while !rest.is_empty() {
+        let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+        let tok = &rest[..end];
+        if let Ok(v) = tok.parse::<f64>() {
+            values.push(v);
+            tokens.push(tok);
+            rest = rest[end..].trim_start();
+            continue;
+        }
+        let n = numeric_prefix_len(tok);
+        let tail = &tok[n..];
+        if n > 0 && tail.starts_with(',') && tail[1..].starts_with(|c: char| c.is_ascii_digit()) {
+            return Err(CameraError::DecimalComma {
+                line,
+                token: tok.into(),
+                text: whole.trim().into(),
+            });
+        }
+        if n > 0 {
+            if let Ok(v) = tok[..n].parse::<f64>() {
+                values.push(v);
+                tokens.push(&tok[..n]);
+                rest = rest[n..].trim();
+            }
+        }
+        break;
+    }
+    Ok(Scan {
+        values,
+        tokens,
+        rest: rest.trim(),
+    })
+}
+
+fn check_finite(values: &[f64], line: usize) -> Result<(), CameraError> {
+    match values.iter().find(|v| !v.is_finite()) {
+        Some(v) => Err(CameraError::InvalidValue {
+            line,
+            message: format!("`{v}` is not a finite number"),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Line 2 or 4: `width height`. DSO reads two integers (`%d %d`) and ignores what follows;
+/// so does monovo, with a note.
+fn parse_size_line(
+    t: &str,
+    line: usize,
+    what: &str,
+    notes: &mut Vec<String>,
+) -> Result<ImageSize, CameraError> {
+    let t = t.trim();
     let expected = format!("the {what} image size `width height` (two positive integers)");
     let parts: Vec<&str> = t.split_whitespace().collect();
     let bad = || CameraError::Parse {
         line,
         expected: expected.clone(),
-        found: t.trim().into(),
+        found: t.into(),
     };
-    if parts.len() != 2 {
+    if parts.len() < 2 {
         return Err(bad());
     }
     let w = parts[0].parse::<usize>().map_err(|_| bad())?;
     let h = parts[1].parse::<usize>().map_err(|_| bad())?;
+    if parts.len() > 2 {
+        notes.push(format!(
+            "line {line}: `{}` after the {what} size is ignored, as DSO ignores it",
+            parts[2..].join(" ")
+        ));
+    }
     ImageSize::new(w, h)
         .validate()
         .map_err(|e| CameraError::InvalidValue {
@@ -239,62 +379,99 @@ pub struct CameraFile {
     pub output: OutputMode,
     /// The output image size (line 4).
     pub output_size: ImageSize,
+    /// Non-blank lines after line 4, which DSO never reads (stereo baselines, a second
+    /// camera, comments): 1-based line number and text.
+    pub ignored_lines: Vec<(usize, String)>,
+    /// What was read differently from a plain 4-line file (ignored numbers, a byte-order
+    /// mark, a negative FOV omega, ...), one sentence each starting with the line number.
+    pub warnings: Vec<String>,
 }
 
 const MODEL_EXPECTED: &str = "a camera model: `FOV`, `Pinhole`, `RadTan`, `EquiDistant` or `KannalaBrandt` followed by `fx fy cx cy` and its parameters, or a legacy line of 5 (FOV) or 8 (RadTan) numbers";
 
 impl CameraFile {
-    /// Parses the text of a camera.txt file. Locale independent; every number must be finite.
+    /// Parses the text of a camera.txt file exactly as DSO reads it: the model on line 1
+    /// (DSO's prefixes and legacy number lines, numbers read like C's `sscanf`), the sizes on
+    /// lines 2 and 4, the output on line 3; lines after line 4 are ignored (listed in
+    /// [`CameraFile::ignored_lines`]). Beyond DSO: a UTF-8 byte-order mark, CRLF line ends,
+    /// blanks around keywords and any case of `crop`/`full`/`none` are accepted, numbers must
+    /// be finite, and a file of only lines 1-2 means `crop` at the input size. Everything read
+    /// differently from a plain file is noted in [`CameraFile::warnings`].
     pub fn parse(text: &str) -> Result<CameraFile, CameraError> {
+        let mut warnings = Vec::new();
+        let text = match text.strip_prefix('\u{feff}') {
+            Some(t) => {
+                warnings.push(
+                    "line 1: a UTF-8 byte-order mark starts the file; monovo skips it, DSO cannot read such a file".to_string(),
+                );
+                t
+            }
+            None => text,
+        };
         let lines: Vec<&str> = text.lines().collect();
-        // Trailing blank lines are fine; anything after line 4 is not.
-        let last = lines
+        let line_at = |i: usize| lines.get(i).map(|l| l.trim()).unwrap_or("");
+        let ignored_lines: Vec<(usize, String)> = lines
             .iter()
-            .rposition(|l| !l.trim().is_empty())
-            .map_or(0, |i| i + 1);
-        if last == 0 {
+            .enumerate()
+            .skip(4)
+            .filter(|(_, l)| !l.trim().is_empty())
+            .map(|(i, l)| (i + 1, l.trim().to_string()))
+            .collect();
+        if line_at(0).is_empty() {
             return Err(CameraError::Parse {
                 line: 1,
                 expected: MODEL_EXPECTED.into(),
                 found: String::new(),
             });
         }
-        if last > 4 {
-            return Err(CameraError::Parse {
-                line: 5,
-                expected: "the end of the file (camera.txt has 4 lines)".into(),
-                found: lines[4].trim().into(),
-            });
-        }
-        let line_at = |i: usize| lines.get(i).map(|l| l.trim()).unwrap_or("");
-        if last < 2 {
+        if line_at(1).is_empty() {
             return Err(CameraError::Parse {
                 line: 2,
                 expected: "the input image size `width height`".into(),
                 found: String::new(),
             });
         }
-        let input_size = parse_size_line(line_at(1), 2, "input")?;
-        let input = parse_model_line(line_at(0), 1, input_size)?;
-        let (output, output_size) = match last {
-            2 => (OutputMode::Crop, input_size),
-            3 => {
+        let input_size = parse_size_line(line_at(1), 2, "input", &mut warnings)?;
+        let input = parse_model_line(lines[0], 1, input_size, &mut warnings)?;
+        let (output, output_size) = match (line_at(2).is_empty(), line_at(3).is_empty()) {
+            (true, true) => (OutputMode::Crop, input_size),
+            (true, false) => {
+                return Err(CameraError::Parse {
+                    line: 3,
+                    expected: "the output camera: `crop`, `full`, `none` or `fx fy cx cy 0`".into(),
+                    found: String::new(),
+                })
+            }
+            (false, true) => {
                 return Err(CameraError::Parse {
                     line: 4,
                     expected: "the output image size `width height`".into(),
                     found: String::new(),
                 })
             }
-            _ => (
-                parse_output_line(line_at(2), 3)?,
-                parse_size_line(line_at(3), 4, "output")?,
+            (false, false) => (
+                parse_output_line_noted(line_at(2), 3, &mut warnings)?,
+                parse_size_line(line_at(3), 4, "output", &mut warnings)?,
             ),
         };
+        if let Some((first, _)) = ignored_lines.first() {
+            let last = ignored_lines.last().map_or(*first, |l| l.0);
+            let which = if last == *first {
+                format!("line {first} is")
+            } else {
+                format!("lines {first}-{last} are")
+            };
+            warnings.push(format!(
+                "{which} ignored: DSO reads only lines 1-4 of camera.txt"
+            ));
+        }
         Ok(CameraFile {
             input,
             input_size,
             output,
             output_size,
+            ignored_lines,
+            warnings,
         })
     }
 
@@ -324,6 +501,8 @@ impl CameraFile {
             input_size: size,
             output: OutputMode::None,
             output_size: size,
+            ignored_lines: Vec::new(),
+            warnings: Vec::new(),
         }
     }
 }
@@ -335,83 +514,102 @@ impl FromStr for CameraFile {
     }
 }
 
-fn parse_model_line(t: &str, line: usize, size: ImageSize) -> Result<CameraModel, CameraError> {
-    let mut toks = t.split_whitespace();
-    let first = toks.next().ok_or_else(|| CameraError::Parse {
-        line,
-        expected: MODEL_EXPECTED.into(),
-        found: t.into(),
-    })?;
-    let prefix = if first.parse::<f64>().is_ok()
-        || first.eq_ignore_ascii_case("nan")
-        || first.eq_ignore_ascii_case("inf")
-    {
-        None
-    } else {
-        Some(first)
+/// The model names DSO recognises, with their number of parameters after `fx fy cx cy`.
+const MODELS: [(&str, usize); 5] = [
+    ("KannalaBrandt", 4),
+    ("RadTan", 4),
+    ("EquiDistant", 4),
+    ("FOV", 1),
+    ("Pinhole", 1),
+];
+
+/// Line 1, as DSO reads it: a legacy line of 8 or more numbers is RadTan, of 5 to 7 numbers
+/// FOV (a pinhole when the 5th is 0); else a model name followed by at least its number of
+/// values. Numbers beyond those DSO reads are ignored with a note, except on 8-parameter
+/// models, where DSO's behaviour is undefined: there extra numbers must be 0 (a zero `k3`).
+fn parse_model_line(
+    raw: &str,
+    line: usize,
+    size: ImageSize,
+    notes: &mut Vec<String>,
+) -> Result<CameraModel, CameraError> {
+    let t = raw.trim();
+    let named = MODELS.iter().find_map(|&(name, n)| {
+        let head = t.get(..name.len())?;
+        head.eq_ignore_ascii_case(name).then_some((name, n, head))
+    });
+    if named.is_some() && raw.starts_with(char::is_whitespace) {
+        notes.push(format!(
+            "line {line}: blanks before the model name are skipped; DSO cannot read such a line"
+        ));
+    }
+    let (name, n_dist, values) = match named {
+        Some((name, n, head)) => {
+            if head != name {
+                notes.push(format!(
+                    "line {line}: `{head}` read as `{name}`; DSO needs exactly `{name}`"
+                ));
+            }
+            let scan = scan_numbers(&t[name.len()..], line, t)?;
+            (name, n, scan)
+        }
+        None => {
+            let scan = scan_numbers(t, line, t)?;
+            match scan.values.len() {
+                n if n >= 8 => ("RadTan", 4, scan),
+                5..=7 => ("FOV", 1, scan),
+                _ => {
+                    return Err(CameraError::Parse {
+                        line,
+                        expected: MODEL_EXPECTED.into(),
+                        found: t.into(),
+                    })
+                }
+            }
+        }
     };
-    let rest = match prefix {
-        Some(p) => t[t.find(p).map_or(0, |i| i + p.len())..].trim(),
-        None => t,
-    };
-    let nums = parse_numbers(rest, line, MODEL_EXPECTED)?;
-    let count_error = |name: &str, want: &str| CameraError::Parse {
-        line,
-        expected: format!("{name} followed by {want} numbers"),
-        found: t.into(),
-    };
-    let kind = match prefix {
-        Some(p) => match p.to_ascii_lowercase().as_str() {
-            "fov" => {
-                if nums.len() != 5 {
-                    return Err(count_error("FOV", "5 (fx fy cx cy omega)"));
-                }
-                "FOV"
-            }
-            "pinhole" => {
-                if !(nums.len() == 4 || (nums.len() == 5 && nums[4] == 0.0)) {
-                    return Err(count_error("Pinhole", "4 or 5 (fx fy cx cy 0)"));
-                }
-                "Pinhole"
-            }
-            "radtan" => {
-                if nums.len() != 8 {
-                    return Err(count_error("RadTan", "8 (fx fy cx cy k1 k2 p1 p2)"));
-                }
-                "RadTan"
-            }
-            "equidistant" => {
-                if nums.len() != 8 {
-                    return Err(count_error("EquiDistant", "8 (fx fy cx cy k1 k2 k3 k4)"));
-                }
-                "EquiDistant"
-            }
-            "kannalabrandt" => {
-                if nums.len() != 8 {
-                    return Err(count_error("KannalaBrandt", "8 (fx fy cx cy k0 k1 k2 k3)"));
-                }
-                "KannalaBrandt"
-            }
-            _ => {
+    let want = 4 + n_dist;
+    let nums = &values.values;
+    if nums.len() < want {
+        let what = match name {
+            "FOV" => "5 numbers `fx fy cx cy omega`",
+            "Pinhole" => "5 numbers `fx fy cx cy 0` (DSO refuses 4)",
+            "RadTan" => "8 numbers `fx fy cx cy k1 k2 p1 p2`",
+            "EquiDistant" => "8 numbers `fx fy cx cy k1 k2 k3 k4`",
+            _ => "8 numbers `fx fy cx cy k0 k1 k2 k3`",
+        };
+        return Err(CameraError::Parse {
+            line,
+            expected: format!("{name} followed by {what}"),
+            found: t.into(),
+        });
+    }
+    check_finite(&nums[..want], line)?;
+    if nums.len() > want || !values.rest.is_empty() {
+        let extra = &nums[want..];
+        if n_dist == 4 && !extra.is_empty() {
+            // DSO's reader has 10 conversions for 8 destinations here: undefined behaviour.
+            if extra.iter().any(|v| *v != 0.0) || !values.rest.is_empty() {
                 return Err(CameraError::Parse {
                     line,
-                    expected: MODEL_EXPECTED.into(),
+                    expected: format!(
+                        "exactly 8 numbers for {name} (DSO's behaviour with more is undefined; a 5th distortion coefficient like k3 = {} cannot be represented)",
+                        values.after(want)
+                    ),
                     found: t.into(),
-                })
+                });
             }
-        },
-        None => match nums.len() {
-            5 => "FOV",
-            8 => "RadTan",
-            _ => {
-                return Err(CameraError::Parse {
-                    line,
-                    expected: MODEL_EXPECTED.into(),
-                    found: t.into(),
-                })
-            }
-        },
-    };
+            notes.push(format!(
+                "line {line}: the zero(s) `{}` after the 8 numbers of {name} are ignored (DSO's behaviour with more than 8 numbers is undefined)",
+                values.after(want)
+            ));
+        } else {
+            notes.push(format!(
+                "line {line}: `{}` after the {want} numbers of {name} is ignored, as DSO ignores it",
+                values.after(want)
+            ));
+        }
+    }
     if nums[0] <= 0.0 || nums[1] <= 0.0 {
         return Err(CameraError::InvalidValue {
             line,
@@ -422,11 +620,18 @@ fn parse_model_line(t: &str, line: usize, size: ImageSize) -> Result<CameraModel
         });
     }
     let k = intrinsics_from_file_values([nums[0], nums[1], nums[2], nums[3]], size);
-    let p = |i: usize| nums.get(i).copied().unwrap_or(0.0);
-    let model = match kind {
+    let p = |i: usize| nums[i];
+    let model = match name {
         "FOV" => {
-            let omega = p(4);
-            if !(0.0..std::f64::consts::PI).contains(&omega) {
+            let mut omega = p(4);
+            if omega < 0.0 {
+                notes.push(format!(
+                    "line {line}: FOV omega {omega} is negative; the FOV model is even in omega, so it acts as {} (as in DSO)",
+                    -omega
+                ));
+                omega = -omega;
+            }
+            if omega >= std::f64::consts::PI {
                 return Err(CameraError::InvalidValue {
                     line,
                     message: format!("FOV omega must be in [0, pi) radians, got {omega}"),
@@ -438,7 +643,15 @@ fn parse_model_line(t: &str, line: usize, size: ImageSize) -> Result<CameraModel
                 CameraModel::Fov { k, omega }
             }
         }
-        "Pinhole" => CameraModel::Pinhole(k),
+        "Pinhole" => {
+            if p(4) != 0.0 {
+                notes.push(format!(
+                    "line {line}: the 5th number of Pinhole ({}) is ignored, as DSO ignores it",
+                    p(4)
+                ));
+            }
+            CameraModel::Pinhole(k)
+        }
         "RadTan" => CameraModel::RadTan {
             k,
             coeffs: [p(4), p(5), p(6), p(7)],

@@ -17,6 +17,16 @@ pub enum CameraError {
         /// What it contains (trimmed).
         found: String,
     },
+    /// A number written with a decimal comma (`0,5`); camera.txt needs a '.'.
+    #[error("line {line}: `{token}` in `{text}`: the decimal separator must be '.', not ',' (DSO reads `0,5` as 0)")]
+    DecimalComma {
+        /// 1-based line number.
+        line: usize,
+        /// The offending token.
+        token: String,
+        /// The line (trimmed).
+        text: String,
+    },
     /// A value parsed but is not acceptable (non-finite, non-positive focal length, ...).
     #[error("line {line}: {message}")]
     InvalidValue {
@@ -34,12 +44,6 @@ pub enum CameraError {
         height: usize,
         /// Why it is refused.
         reason: &'static str,
-    },
-    /// The output mode `none` keeps the input camera, which is only possible for a pinhole.
-    #[error("output camera `none` keeps the input camera, which must then be a pinhole, but it is {model}; use `crop`, `full` or an explicit pinhole instead")]
-    NoneNeedsPinhole {
-        /// The input model's name.
-        model: &'static str,
     },
     /// `full` cannot include the whole input field of view (it reaches 90 degrees or more).
     #[error("output camera `full` cannot keep the whole field of view of this {model} camera: the border pixel ({u}, {v}) looks 90 degrees or more away from the optical axis; use `crop` or an explicit pinhole")]

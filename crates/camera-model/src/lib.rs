@@ -47,4 +47,4 @@ pub use camera_file::{
 pub use error::CameraError;
 pub use image::Image;
 pub use model::{CameraModel, Intrinsics};
-pub use rectify::{output_intrinsics, RectifyMap};
+pub use rectify::{output_intrinsics, output_notes, RectifyMap};

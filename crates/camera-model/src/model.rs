@@ -230,6 +230,24 @@ impl CameraModel {
         }
     }
 
+    /// Whether the distortion is locally one-to-one at the normalised pinhole coordinates
+    /// `n`: beyond the fold of a RadTan polynomial (or where a fisheye polynomial stops
+    /// increasing) the image repeats mirrored, and such pixels are not a valid view.
+    pub(crate) fn unfolded_at(&self, n: [f64; 2]) -> bool {
+        match self {
+            CameraModel::Pinhole(_) | CameraModel::Fov { .. } => true,
+            CameraModel::RadTan { coeffs, .. } => {
+                let (_, j) = radtan_distort(coeffs, n);
+                j[0] > 0.0 && j[3] > 0.0 && j[0] * j[3] - j[1] * j[2] > 0.0
+            }
+            CameraModel::EquiDistant { coeffs, .. } | CameraModel::KannalaBrandt { coeffs, .. } => {
+                let theta = (n[0] * n[0] + n[1] * n[1]).sqrt().atan();
+                fisheye_poly_derivative(coeffs, theta) > 0.0
+                    && (theta == 0.0 || fisheye_poly(coeffs, theta) > 0.0)
+            }
+        }
+    }
+
     /// Returns the unit-length viewing direction of a pixel, or `None` where the model has
     /// no inverse (outside the FOV model's 90 degree range, or where a fisheye polynomial
     /// or the RadTan iteration does not invert).

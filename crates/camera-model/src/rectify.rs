@@ -5,11 +5,20 @@ use crate::{CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode};
 
 /// Computes the output pinhole camera for `mode` at `out_size`.
 ///
-/// For the FOV model `crop` and `full` use the reference tools' closed form (axis extents,
-/// respectively corner extents, mapped through `T(x) = tan(x omega) / (2 tan(omega / 2))`).
-/// For the other models they are found numerically: `crop` is the largest centred rectangle
-/// (a uniform shrink of the axis extents) whose every output pixel maps inside the input;
-/// `full` is the bounding box of the input border.
+/// * `none`: the input's own `fx fy cx cy` (its distortion, if any, is ignored: the raw
+///   image passes through, as in DSO); at another output size the image is resized and K
+///   scaled with it (pixel areas: `fx * ow / w`, `(cx + 0.5) * ow / w - 0.5`).
+/// * A pinhole input under `crop` or `full` keeps its whole view, border pixel centre to
+///   border pixel centre (`fx * (ow - 1) / (w - 1)`): at the input size this is the identity.
+/// * For the FOV model `crop` and `full` use the reference tools' closed form (axis extents,
+///   respectively corner extents, mapped through `T(x) = tan(x omega) / (2 tan(omega / 2))`).
+/// * For the other models `crop` finds each of the four sides on its own: it starts from
+///   DSO's own crop (its search in 0.5 % steps, `makeOptimalK_crop`), makes it valid for
+///   every output pixel, then moves every side outward to the exact limit where an output
+///   pixel would leave the input image. The result has no invalid pixel and at least DSO's
+///   field of view on every side. `full` is the bounding box of the input border.
+/// * An explicit pinhole `fx fy cx cy` is relative to the output size when `cx < 1 && cy < 1`
+///   (DSO always reads it as relative), else in pixels.
 pub fn output_intrinsics(
     input: &CameraModel,
     in_size: ImageSize,
@@ -24,29 +33,12 @@ pub fn output_intrinsics(
         OutputMode::Pinhole(v) => Ok(crate::camera_file::intrinsics_from_file_values(
             *v, out_size,
         )),
-        OutputMode::None => {
-            if input.is_pinhole() {
-                Ok(input
-                    .rescaled(
-                        (in_size.width, in_size.height),
-                        (out_size.width, out_size.height),
-                    )
-                    .intrinsics())
-            } else {
-                Err(CameraError::NoneNeedsPinhole {
-                    model: input.name(),
-                })
-            }
-        }
-        _ if input.is_pinhole() => {
-            // A pinhole input has nothing to undistort: crop and full are a plain resize.
-            Ok(input
-                .rescaled(
-                    (in_size.width, in_size.height),
-                    (out_size.width, out_size.height),
-                )
-                .intrinsics())
-        }
+        OutputMode::None => Ok(passthrough_intrinsics(
+            input.intrinsics(),
+            in_size,
+            out_size,
+        )),
+        _ if input.is_pinhole() => Ok(pinhole_view(input.intrinsics(), in_size, out_size)),
         OutputMode::Crop => {
             if let CameraModel::Fov { k, omega } = input {
                 let t = |x: f64| fov_undistort_radius(*omega, x);
@@ -100,6 +92,71 @@ pub fn output_intrinsics(
             }
             full_numeric(input, in_size, out_size)
         }
+    }
+}
+
+/// What rectifying with `mode` does differently from what a DSO user may expect, one
+/// sentence each: `none` ignoring a distortion or resizing, an explicit pinhole in pixels.
+pub fn output_notes(
+    input: &CameraModel,
+    in_size: ImageSize,
+    mode: &OutputMode,
+    out_size: ImageSize,
+) -> Vec<String> {
+    let mut notes = Vec::new();
+    match mode {
+        OutputMode::None => {
+            if !input.is_pinhole() {
+                notes.push(format!(
+                    "output `none` passes the raw image through as a pinhole with the input's fx fy cx cy: the {} distortion is ignored (DSO does the same, silently); use `crop` or `full` to undistort",
+                    input.name()
+                ));
+            }
+            if in_size != out_size {
+                notes.push(format!(
+                    "output `none` at {out_size} from {in_size}: the raw image is resized (DSO refuses `none` with another size)"
+                ));
+            }
+        }
+        OutputMode::Pinhole(v) if !(v[2] < 1.0 && v[3] < 1.0) => notes.push(format!(
+            "the output pinhole `{} {} {} {}` is read in pixels because cx or cy is 1 or more; DSO always reads it as relative to the output size",
+            v[0], v[1], v[2], v[3]
+        )),
+        _ => {}
+    }
+    notes
+}
+
+/// `none`: the input K, scaled with the image when the output size differs.
+fn passthrough_intrinsics(k: Intrinsics, in_size: ImageSize, out_size: ImageSize) -> Intrinsics {
+    if in_size == out_size {
+        return k;
+    }
+    CameraModel::Pinhole(k)
+        .rescaled(
+            (in_size.width, in_size.height),
+            (out_size.width, out_size.height),
+        )
+        .intrinsics()
+}
+
+/// The whole view of a pinhole camera, border pixel centres onto border pixel centres.
+fn pinhole_view(k: Intrinsics, in_size: ImageSize, out_size: ImageSize) -> Intrinsics {
+    let sx = if in_size.width == out_size.width {
+        1.0
+    } else {
+        (out_size.width - 1) as f64 / (in_size.width - 1) as f64
+    };
+    let sy = if in_size.height == out_size.height {
+        1.0
+    } else {
+        (out_size.height - 1) as f64 / (in_size.height - 1) as f64
+    };
+    Intrinsics {
+        fx: k.fx * sx,
+        fy: k.fy * sy,
+        cx: k.cx * sx,
+        cy: k.cy * sy,
     }
 }
 
@@ -167,46 +224,172 @@ fn full_numeric(
     Ok(k_from_rect(rect, out_size))
 }
 
-/// Whether the pixel `src` lies where the bilinear remap can sample it.
+/// Source positions this close outside the input image (in pixels) are moved onto its border:
+/// floating-point round trips (an identity or upscaled pinhole map, a crop side found to the
+/// last bit) land there, and a millionth of a pixel changes no interpolated value.
+pub(crate) const BORDER_SNAP: f64 = 1e-6;
+
+/// The pixel `src` where the bilinear remap can sample it, moved onto the border when it is
+/// at most [`BORDER_SNAP`] outside; `None` outside the image or for NaN.
 #[inline]
-fn inside(src: [f64; 2], size: ImageSize) -> bool {
-    src[0] >= 0.0
-        && src[1] >= 0.0
-        && src[0] <= (size.width - 1) as f64
-        && src[1] <= (size.height - 1) as f64
+fn snap_inside(src: [f64; 2], size: ImageSize) -> Option<[f64; 2]> {
+    let (w, h) = ((size.width - 1) as f64, (size.height - 1) as f64);
+    let ok = src[0] >= -BORDER_SNAP
+        && src[1] >= -BORDER_SNAP
+        && src[0] <= w + BORDER_SNAP
+        && src[1] <= h + BORDER_SNAP;
+    ok.then(|| [src[0].clamp(0.0, w), src[1].clamp(0.0, h)])
 }
 
-/// Farthest normalised coordinate along a ray from the principal point (direction `dir` in
-/// pixels) that still unprojects in front of the camera, searched on the pixel segment.
-fn axis_extent(input: &CameraModel, in_size: ImageSize, dir: [f64; 2]) -> Option<f64> {
-    let k = input.intrinsics();
-    let (w, h) = ((in_size.width - 1) as f64, (in_size.height - 1) as f64);
-    let start = [k.cx.clamp(0.0, w), k.cy.clamp(0.0, h)];
-    // distance to the image edge along dir
-    let mut t_max = f64::INFINITY;
-    for i in 0..2 {
-        let lim = if i == 0 { w } else { h };
-        if dir[i] > 0.0 {
-            t_max = t_max.min((lim - start[i]) / dir[i]);
-        } else if dir[i] < 0.0 {
-            t_max = t_max.min(-start[i] / dir[i]);
+/// The raw pixel of a normalised output direction, when it lies in the input image before
+/// any fold of the distortion (beyond a fold the image repeats mirrored).
+#[inline]
+fn source_of(input: &CameraModel, in_size: ImageSize, n: [f64; 2]) -> Option<[f64; 2]> {
+    if !input.unfolded_at(n) {
+        return None;
+    }
+    input
+        .project_normalized(n)
+        .and_then(|p| snap_inside(p, in_size))
+}
+
+/// Whether every border pixel of the output pinhole spanning the normalised rectangle
+/// `rect = [x0, x1, y0, y1]` has a source in the input image.
+fn border_fits(input: &CameraModel, in_size: ImageSize, out: ImageSize, rect: [f64; 4]) -> bool {
+    if !(rect[0] < rect[1] && rect[2] < rect[3]) {
+        return false;
+    }
+    let k = k_from_rect(rect, out);
+    border_pixels(out).all(|p| source_of(input, in_size, k.pixel_to_normalized(p)).is_some())
+}
+
+/// DSO's crop search (`makeOptimalK_crop` in DSO's `src/util/Undistort.cpp`, from its
+/// description): the axis extents sampled in steps of 1e-4 over [-5, 5) and enlarged by 1 %,
+/// then the sides whose border line leaves the image (tested on the one coordinate across
+/// that side, at the output pixel spacing) shrunk by 0.5 % per round, only the wider pair when
+/// both pairs are out. `None` when DSO would give up (no valid axis sample, or 500 rounds).
+fn dso_crop_rect(input: &CameraModel, in_size: ImageSize, out: ImageSize) -> Option<[f64; 4]> {
+    let (wm1, hm1) = ((in_size.width - 1) as f64, (in_size.height - 1) as f64);
+    let raw = |x: f64, y: f64| input.project_normalized([x, y]);
+    let x_in = |p: Option<[f64; 2]>| p.is_some_and(|p| p[0] > 0.0 && p[0] < wm1);
+    let y_in = |p: Option<[f64; 2]>| p.is_some_and(|p| p[1] > 0.0 && p[1] < hm1);
+    let mut x_range: Option<(f64, f64)> = None;
+    let mut y_range: Option<(f64, f64)> = None;
+    for i in 0..100_000 {
+        let t = (i as f64 - 50_000.0) / 10_000.0;
+        if x_in(raw(t, 0.0)) {
+            x_range = Some(x_range.map_or((t, t), |(a, _)| (a, t)));
+        }
+        if y_in(raw(0.0, t)) {
+            y_range = Some(y_range.map_or((t, t), |(a, _)| (a, t)));
         }
     }
-    let at = |t: f64| input.unproject_normalized([start[0] + t * dir[0], start[1] + t * dir[1]]);
-    let comp = |n: [f64; 2]| if dir[0] != 0.0 { n[0] } else { n[1] };
-    if let Some(n) = at(t_max) {
-        return Some(comp(n));
+    let (x0, x1) = x_range?;
+    let (y0, y1) = y_range?;
+    let mut r = [x0 * 1.01, x1 * 1.01, y0 * 1.01, y1 * 1.01];
+    let (ow, oh) = (out.width, out.height);
+    for _ in 0..=500 {
+        let mut out_of = [false; 4];
+        for j in 0..oh {
+            let y = r[2] + (r[3] - r[2]) * j as f64 / (oh - 1) as f64;
+            out_of[0] |= !x_in(raw(r[0], y));
+            out_of[1] |= !x_in(raw(r[1], y));
+        }
+        for i in 0..ow {
+            let x = r[0] + (r[1] - r[0]) * i as f64 / (ow - 1) as f64;
+            out_of[2] |= !y_in(raw(x, r[2]));
+            out_of[3] |= !y_in(raw(x, r[3]));
+        }
+        if (out_of[0] || out_of[1]) && (out_of[2] || out_of[3]) {
+            if r[1] - r[0] > r[3] - r[2] {
+                out_of[2] = false;
+                out_of[3] = false;
+            } else {
+                out_of[0] = false;
+                out_of[1] = false;
+            }
+        }
+        if !out_of.iter().any(|o| *o) {
+            return Some(r);
+        }
+        for (side, out) in r.iter_mut().zip(out_of) {
+            if out {
+                *side *= 0.995;
+            }
+        }
     }
-    let (mut lo, mut hi) = (0.0, t_max);
+    None
+}
+
+/// The largest uniform shrink of `rect` towards the optical axis whose border fits.
+fn shrink_to_fit(
+    input: &CameraModel,
+    in_size: ImageSize,
+    out: ImageSize,
+    rect: [f64; 4],
+) -> Option<[f64; 4]> {
+    let scaled = |s: f64| rect.map(|v| v * s);
+    if border_fits(input, in_size, out, rect) {
+        return Some(rect);
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
     for _ in 0..60 {
         let mid = 0.5 * (lo + hi);
-        if at(mid).is_some() {
+        if border_fits(input, in_size, out, scaled(mid)) {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    at(lo).map(comp)
+    (lo > 0.0).then(|| scaled(lo))
+}
+
+/// Moves side `i` of `rect` (0 left, 1 right, 2 top, 3 bottom) outward to the last position
+/// where the border still fits: doubling steps out, then bisection to the last bit.
+fn grow_side(
+    input: &CameraModel,
+    in_size: ImageSize,
+    out: ImageSize,
+    rect: &mut [f64; 4],
+    i: usize,
+) -> bool {
+    let sign = if i.is_multiple_of(2) { -1.0 } else { 1.0 };
+    let start = rect[i];
+    let fits = |v: f64| {
+        let mut r = *rect;
+        r[i] = v;
+        border_fits(input, in_size, out, r)
+    };
+    // the largest extent tried: beyond DSO's sampled range [-5, 5) and far beyond any lens
+    let cap = (64.0 * start.abs()).max(10.0);
+    let mut lo = start;
+    let mut step = 1e-3 * start.abs().max(1e-3);
+    let mut hi = None;
+    while (lo + sign * step).abs() <= cap {
+        let cand = lo + sign * step;
+        if fits(cand) {
+            lo = cand;
+            step *= 2.0;
+        } else {
+            hi = Some(cand);
+            break;
+        }
+    }
+    if let Some(mut hi) = hi {
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if mid == lo || mid == hi {
+                break;
+            }
+            if fits(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+    }
+    rect[i] = lo;
+    (lo - start).abs() > 1e-12 * start.abs().max(1e-12)
 }
 
 fn crop_numeric(
@@ -218,50 +401,34 @@ fn crop_numeric(
         model: input.name(),
         reason: reason.into(),
     };
-    let x0 = axis_extent(input, in_size, [-1.0, 0.0]).ok_or_else(|| fail("left axis"))?;
-    let x1 = axis_extent(input, in_size, [1.0, 0.0]).ok_or_else(|| fail("right axis"))?;
-    let y0 = axis_extent(input, in_size, [0.0, -1.0]).ok_or_else(|| fail("top axis"))?;
-    let y1 = axis_extent(input, in_size, [0.0, 1.0]).ok_or_else(|| fail("bottom axis"))?;
-    if !(x0 < 0.0 && x1 > 0.0 && y0 < 0.0 && y1 > 0.0) {
+    // Start from DSO's crop; when DSO would give up, from a small square around the axis.
+    let start = dso_crop_rect(input, in_size, out_size).unwrap_or([-1e-3, 1e-3, -1e-3, 1e-3]);
+    if !(start[0] < 0.0 && start[1] > 0.0 && start[2] < 0.0 && start[3] > 0.0) {
         return Err(fail("the principal point is not inside the image"));
     }
-    let base = [x0, x1, y0, y1];
-    let scaled = |s: f64| k_from_rect([s * x0, s * x1, s * y0, s * y1], out_size);
-    let border_ok = |k: &Intrinsics| {
-        border_pixels(out_size).all(|p| {
-            input
-                .project_normalized(k.pixel_to_normalized(p))
-                .is_some_and(|src| inside(src, in_size))
-        })
-    };
-    let mut s = 1.0;
-    if !border_ok(&scaled(1.0)) {
-        let (mut lo, mut hi) = (0.0, 1.0);
-        for _ in 0..50 {
-            let mid = 0.5 * (lo + hi);
-            if border_ok(&scaled(mid)) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
+    let mut rect = shrink_to_fit(input, in_size, out_size, start)
+        .ok_or_else(|| fail("no rectangle around the principal point fits in the image"))?;
+    for _round in 0..20 {
+        let mut moved = false;
+        for i in 0..4 {
+            moved |= grow_side(input, in_size, out_size, &mut rect, i);
         }
-        s = lo;
+        if !moved {
+            break;
+        }
     }
     // The border test implies the interior for well-behaved models; verify every pixel and
     // shrink further if a strongly distorted model folds inward.
-    for _ in 0..200 {
-        if s <= 0.0 {
-            break;
-        }
-        let k = scaled(s);
+    for _ in 0..400 {
+        let k = k_from_rect(rect, out_size);
         let map = RectifyMap::new(input, in_size, k, out_size)?;
         if map.invalid_count() == 0 {
             return Ok(k);
         }
-        s *= 0.995;
+        rect = rect.map(|v| v * 0.995);
     }
     Err(fail(&format!(
-        "no centred rectangle inside the image (axis extents {base:?})"
+        "no centred rectangle inside the image (last tried {rect:?})"
     )))
 }
 
@@ -325,11 +492,63 @@ impl FixedEntry {
 
 impl RectifyMap {
     /// Builds the map from the output pinhole `out_camera` of size `out_size` to `input`.
+    ///
+    /// A pinhole input is mapped in closed form (`x_in = a x_out + b` per axis), so that the
+    /// identity is exact. Sources at most a millionth of a pixel outside the input image are
+    /// moved onto its border; farther out they are invalid.
     pub fn new(
         input: &CameraModel,
         in_size: ImageSize,
         out_camera: Intrinsics,
         out_size: ImageSize,
+    ) -> Result<RectifyMap, CameraError> {
+        if input.is_pinhole() {
+            let k = input.intrinsics();
+            let ax = k.fx / out_camera.fx;
+            let ay = k.fy / out_camera.fy;
+            let bx = k.cx - ax * out_camera.cx;
+            let by = k.cy - ay * out_camera.cy;
+            return RectifyMap::build(in_size, out_size, out_camera, |u, v| {
+                Some([ax * u as f64 + bx, ay * v as f64 + by])
+            });
+        }
+        RectifyMap::build(in_size, out_size, out_camera, |u, v| {
+            input.project_normalized(out_camera.pixel_to_normalized([u as f64, v as f64]))
+        })
+    }
+
+    /// The map of output `none`: the raw image passes through unchanged at the input size;
+    /// at another size it is resized (pixel areas, sources clamped to the image like any
+    /// image resize). `camera` is the output K (see [`output_intrinsics`]).
+    pub fn passthrough(
+        in_size: ImageSize,
+        camera: Intrinsics,
+        out_size: ImageSize,
+    ) -> Result<RectifyMap, CameraError> {
+        let sx = in_size.width as f64 / out_size.width as f64;
+        let sy = in_size.height as f64 / out_size.height as f64;
+        let (wm1, hm1) = (
+            in_size.width.saturating_sub(1) as f64,
+            in_size.height.saturating_sub(1) as f64,
+        );
+        let same = in_size == out_size;
+        RectifyMap::build(in_size, out_size, camera, |u, v| {
+            if same {
+                Some([u as f64, v as f64])
+            } else {
+                Some([
+                    ((u as f64 + 0.5) * sx - 0.5).clamp(0.0, wm1),
+                    ((v as f64 + 0.5) * sy - 0.5).clamp(0.0, hm1),
+                ])
+            }
+        })
+    }
+
+    fn build(
+        in_size: ImageSize,
+        out_size: ImageSize,
+        camera: Intrinsics,
+        source: impl Fn(usize, usize) -> Option<[f64; 2]>,
     ) -> Result<RectifyMap, CameraError> {
         let in_size = in_size.validate()?;
         let out_size = out_size.validate()?;
@@ -341,9 +560,8 @@ impl RectifyMap {
         let (wm1, hm1) = (in_size.width - 1, in_size.height - 1);
         for v in 0..out_size.height {
             for u in 0..out_size.width {
-                let nrm = out_camera.pixel_to_normalized([u as f64, v as f64]);
-                match input.project_normalized(nrm) {
-                    Some(src) if inside(src, in_size) => {
+                match source(u, v).and_then(|s| snap_inside(s, in_size)) {
+                    Some(src) => {
                         // Keep x0 <= w-2 so that x0 + 1 is in the image; x == w-1 gives fx = 1.
                         let x0 = (src[0].floor() as usize).min(wm1 - 1);
                         let y0 = (src[1].floor() as usize).min(hm1 - 1);
@@ -354,7 +572,7 @@ impl RectifyMap {
                         frac.push([fx as f32, fy as f32]);
                         fixed.push(FixedEntry::new(i, fx, fy));
                     }
-                    _ => {
+                    None => {
                         invalid += 1;
                         index.push(u32::MAX);
                         frac.push([0.0, 0.0]);
@@ -366,7 +584,7 @@ impl RectifyMap {
         Ok(RectifyMap {
             input: in_size,
             output: out_size,
-            camera: out_camera,
+            camera,
             index,
             frac,
             fixed,
@@ -374,7 +592,8 @@ impl RectifyMap {
         })
     }
 
-    /// Builds the map for the output requested by `mode` (see [`output_intrinsics`]).
+    /// Builds the map for the output requested by `mode` (see [`output_intrinsics`]); `none`
+    /// is [`RectifyMap::passthrough`], whatever the input model.
     pub fn for_mode(
         input: &CameraModel,
         in_size: ImageSize,
@@ -382,7 +601,10 @@ impl RectifyMap {
         out_size: ImageSize,
     ) -> Result<RectifyMap, CameraError> {
         let k = output_intrinsics(input, in_size, mode, out_size)?;
-        RectifyMap::new(input, in_size, k, out_size)
+        match mode {
+            OutputMode::None => RectifyMap::passthrough(in_size, k, out_size),
+            _ => RectifyMap::new(input, in_size, k, out_size),
+        }
     }
 
     /// The output pinhole camera.
@@ -485,6 +707,27 @@ impl RectifyMap {
             *o = ((v as u32 + (1 << (FRAC_BITS - 1))) >> FRAC_BITS) as u8;
         }
         Ok(())
+    }
+
+    /// Bilinear remap of a 16-bit image, rounded to nearest; invalid pixels are 0. Exact
+    /// where the source is a pixel centre (an identity map copies the image).
+    pub fn remap_u16(&self, src: &Image<u16>) -> Result<Image<u16>, CameraError> {
+        self.check_input(src)?;
+        let s = src.data();
+        let w = self.input.width;
+        let mut out = Image::filled(self.output.width, self.output.height, 0u16);
+        for ((o, &idx), &[fx, fy]) in out.data_mut().iter_mut().zip(&self.index).zip(&self.frac) {
+            if idx == u32::MAX {
+                continue;
+            }
+            let i = idx as usize;
+            let (a, b) = (s[i] as f32, s[i + 1] as f32);
+            let (c, d) = (s[i + w] as f32, s[i + w + 1] as f32);
+            let top = a + fx * (b - a);
+            let bottom = c + fx * (d - c);
+            *o = (top + fy * (bottom - top)).round().clamp(0.0, 65535.0) as u16;
+        }
+        Ok(out)
     }
 
     /// Bilinear remap of a float image; invalid pixels are NaN.

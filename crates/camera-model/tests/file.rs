@@ -68,7 +68,8 @@ fn explicit_output_pinhole_and_two_line_files() {
 fn err_line(text: &str) -> (usize, String) {
     match CameraFile::parse(text) {
         Err(e @ CameraError::Parse { line, .. })
-        | Err(e @ CameraError::InvalidValue { line, .. }) => (line, e.to_string()),
+        | Err(e @ CameraError::InvalidValue { line, .. })
+        | Err(e @ CameraError::DecimalComma { line, .. }) => (line, e.to_string()),
         other => panic!("{text:?}: expected a line error, got {other:?}"),
     }
 }
@@ -109,7 +110,7 @@ fn malformed_files_name_the_line_and_what_was_expected() {
         3
     );
     assert_eq!(
-        err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n1 2 3 4 5\n640 480").0,
+        err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n1 2 3\n640 480").0,
         3
     );
     assert_eq!(err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\ncrop\n").0, 4);
@@ -118,14 +119,123 @@ fn malformed_files_name_the_line_and_what_was_expected() {
         4
     );
     assert_eq!(
-        err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\ncrop\n640 480\nextra").0,
-        5
+        err_line("Pinhole 500 500 320 240\n640 480\ncrop\n640 480").0,
+        1
     );
+    assert_eq!(err_line("500 500 320 240\n640 480\ncrop\n640 480").0, 1);
+    assert_eq!(
+        err_line("RadTan 500 500 320 240 0.1 0 0\n640 480\ncrop\n640 480").0,
+        1
+    );
+    assert_eq!(err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n\n640 480").0, 3);
     let (_, msg) = err_line("FOV 0,5 0,6 0,5 0,5 0,9\n640 480\ncrop\n640 480");
     assert!(
-        msg.contains("line 1") && msg.contains("FOV") && msg.contains("0,5"),
+        msg.contains("line 1")
+            && msg.contains("FOV")
+            && msg.contains("0,5")
+            && msg.contains("decimal separator must be '.'"),
         "{msg}"
     );
+    // a decimal comma in the 5th number only would make DSO read a pinhole silently
+    let (line, msg) = err_line("500 500 320 240 0,9\n640 480\ncrop\n640 480");
+    assert!(line == 1 && msg.contains("0,9"), "{msg}");
+    let (line, msg) = err_line("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n0,5 0,5 0,5 0,5 0\n640 480");
+    assert!(line == 3 && msg.contains("decimal"), "{msg}");
+}
+
+/// DSO reads lines 1-4 only; stereo forks put a baseline on line 5, others a second camera.
+#[test]
+fn lines_after_line_4_are_ignored_and_listed() {
+    let f = CameraFile::parse(
+        "Pinhole 718.856 718.856 607.1928 185.2157 0\n1241 376\ncrop\n1241 376\n0.537165\n",
+    )
+    .unwrap();
+    assert_eq!(f.ignored_lines, vec![(5, "0.537165".to_string())]);
+    assert!(
+        f.warnings.iter().any(|w| w.contains("line 5 is ignored")),
+        "{:?}",
+        f.warnings
+    );
+    let f = CameraFile::parse(
+        "0.9 1.6 0.25 0.96 0\n1280 720\ncrop\n640 360\n\n0.5 0.5 0.5 0.5 0\n1280 720\ncrop\n640 360\n",
+    )
+    .unwrap();
+    assert_eq!(f.ignored_lines.len(), 4);
+    assert_eq!(f.ignored_lines[0].0, 6);
+    assert!(f
+        .warnings
+        .iter()
+        .any(|w| w.contains("lines 6-9 are ignored")));
+    let plain = CameraFile::parse("0.9 1.6 0.25 0.96 0\n1280 720\ncrop\n640 360\n\n\n").unwrap();
+    assert!(plain.ignored_lines.is_empty() && plain.warnings.is_empty());
+}
+
+/// Numbers are read like C's sscanf: a model followed by more numbers uses the first ones.
+#[test]
+fn extra_numbers_are_read_like_dso() {
+    // DM-VIO 4Seasons: Pinhole followed by 8 numbers
+    let f =
+        CameraFile::parse("Pinhole 501.48 501.21 421.23 167.58 0 0 0 0\n800 400\nnone\n800 400\n")
+            .unwrap();
+    assert_eq!(f.input.name(), "Pinhole");
+    assert_eq!(f.input.intrinsics().fx, 501.48);
+    assert!(
+        f.warnings
+            .iter()
+            .any(|w| w.contains("`0 0 0` after the 5 numbers")),
+        "{:?}",
+        f.warnings
+    );
+    // 6 or 7 legacy numbers: FOV by the 5th, like DSO
+    let f = CameraFile::parse("500 500 320 240 0.9 0.1\n640 480\ncrop\n640 480").unwrap();
+    assert_eq!(f.input.name(), "FOV");
+    // a comma ends the numbers (DM-VIO's M300 file): FOV with omega = |-0.1195|
+    let f = CameraFile::parse(
+        "547.165 544.955 636.887 478.484 -0.1195, -0.0111\n1280 960\ncrop\n1280 960\n",
+    )
+    .unwrap();
+    match f.input {
+        CameraModel::Fov { omega, .. } => assert_eq!(omega, 0.1195),
+        other => panic!("{other:?}"),
+    }
+    assert!(f.warnings.iter().any(|w| w.contains("negative")));
+    assert!(f.warnings.iter().any(|w| w.contains("-0.0111")));
+    // 9 numbers on a RadTan line: DSO is undefined; a zero k3 is harmless, another is refused
+    let f = CameraFile::parse("500 500 350 240 0 0 0 0 0\n752 480\ncrop\n640 480\n").unwrap();
+    assert_eq!(f.input.name(), "RadTan");
+    assert!(!f.warnings.is_empty());
+    let (line, msg) = err_line(
+        "0.863 1.550 0.473 0.520 -0.31 -0.24 -0.003 0.004 0.437\r\n640 360\r\ncrop\r\n640 360",
+    );
+    assert!(line == 1 && msg.contains("0.437"), "{msg}");
+    // explicit output: the 5th number is ignored, 4 numbers are enough
+    let f =
+        CameraFile::parse("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n0.4 0.5 0.5 0.5 1\n640 480").unwrap();
+    assert_eq!(f.output, OutputMode::Pinhole([0.4, 0.5, 0.5, 0.5]));
+    assert!(!f.warnings.is_empty());
+    let f =
+        CameraFile::parse("FOV 0.5 0.6 0.5 0.5 0.9\n640 480\n0.4 0.5 0.5 0.5\n640 480").unwrap();
+    assert_eq!(f.output, OutputMode::Pinhole([0.4, 0.5, 0.5, 0.5]));
+    // line 2 and 4: two integers, the rest ignored
+    let f = CameraFile::parse("FOV 0.5 0.6 0.5 0.5 0.9\n640 480 # raw\ncrop\n640\t480\n").unwrap();
+    assert_eq!(f.input_size, ImageSize::new(640, 480));
+    assert_eq!(f.warnings.len(), 1);
+}
+
+/// A UTF-8 byte-order mark and CRLF line ends do not matter.
+#[test]
+fn byte_order_mark_and_crlf_are_fine() {
+    let plain = CameraFile::parse(DATASET_CAMERA).unwrap();
+    let bom =
+        CameraFile::parse(&format!("\u{feff}{}", DATASET_CAMERA.replace('\n', "\r\n"))).unwrap();
+    assert_eq!(
+        (bom.input, bom.output, bom.output_size),
+        (plain.input, plain.output, plain.output_size)
+    );
+    assert!(bom.warnings[0].contains("byte-order mark"));
+    let f = CameraFile::parse("\u{feff}RadTan 458.654 457.296 367.215 248.375 -0.28 0.07 0.0002 0.00002\r\n752 480\r\ncrop\r\n752 480\r\n").unwrap();
+    assert_eq!(f.input.name(), "RadTan");
+    assert_eq!(f.output, OutputMode::Crop);
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! Output cameras (DESIGN.md test vectors) and rectification maps.
 use crate::common::{all_models, dataset_camera};
 use camera_model::{
-    output_intrinsics, CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode,
-    RectifyMap,
+    output_intrinsics, output_notes, CameraError, CameraModel, Image, ImageSize, Intrinsics,
+    OutputMode, RectifyMap,
 };
 
 /// DESIGN.md: the dataset camera at 1280x1024 to 640x480. Tolerance 1e-3 px, the precision
@@ -86,7 +86,7 @@ fn crop_has_no_invalid_pixel_and_full_keeps_the_field_of_view_for_every_model() 
 }
 
 #[test]
-fn none_keeps_a_pinhole_and_refuses_a_fisheye() {
+fn none_keeps_the_input_camera_and_passes_the_raw_image_through() {
     let k = Intrinsics {
         fx: 320.0,
         fy: 310.0,
@@ -113,10 +113,35 @@ fn none_keeps_a_pinhole_and_refuses_a_fisheye() {
         (half.fx, half.fy, half.cx, half.cy),
         (160.0, 155.0, 159.5, 119.5)
     );
+    // a distorted model: K is the input's, the distortion is ignored, the image copied
     let f = dataset_camera();
-    let e =
-        output_intrinsics(&f.input, f.input_size, &OutputMode::None, f.output_size).unwrap_err();
-    assert!(matches!(e, CameraError::NoneNeedsPinhole { model: "FOV" }));
+    let k = output_intrinsics(&f.input, f.input_size, &OutputMode::None, f.input_size).unwrap();
+    assert_eq!(k, f.input.intrinsics());
+    let map =
+        RectifyMap::for_mode(&f.input, f.input_size, &OutputMode::None, f.input_size).unwrap();
+    let img = Image::from_fn(1280, 1024, |x, y| ((x * 3 + y * 5) % 251) as u8);
+    assert_eq!(map.remap_u8(&img).unwrap(), img);
+    let notes = output_notes(&f.input, f.input_size, &OutputMode::None, f.input_size);
+    assert!(
+        notes.len() == 1 && notes[0].contains("distortion is ignored"),
+        "{notes:?}"
+    );
+    // at another size the image is resized, no pixel is lost
+    let map =
+        RectifyMap::for_mode(&f.input, f.input_size, &OutputMode::None, f.output_size).unwrap();
+    assert_eq!(map.invalid_count(), 0);
+    assert_eq!(
+        output_notes(&f.input, f.input_size, &OutputMode::None, f.output_size).len(),
+        2
+    );
+    let up = RectifyMap::for_mode(
+        &pin,
+        ImageSize::new(640, 480),
+        &OutputMode::None,
+        ImageSize::new(1280, 960),
+    )
+    .unwrap();
+    assert_eq!(up.invalid_count(), 0);
 }
 
 #[test]
@@ -250,4 +275,103 @@ fn identity_map_reproduces_the_image_exactly() {
     assert_eq!(map.invalid_count(), 0);
     let img = Image::from_fn(32, 20, |x, y| (x * 7 + y * 3) as u8);
     assert_eq!(map.remap_u8(&img).unwrap(), img);
+    let img16 = Image::from_fn(32, 20, |x, y| (x * 2000 + y * 7) as u16);
+    assert_eq!(map.remap_u16(&img16).unwrap(), img16);
+    // crop and full of a pinhole at the input size are the identity too
+    for mode in [OutputMode::Crop, OutputMode::Full] {
+        let map = RectifyMap::for_mode(&m, size, &mode, size).unwrap();
+        assert_eq!(map.camera(), k);
+        assert_eq!(map.remap_u8(&img).unwrap(), img, "{mode}");
+    }
+}
+
+/// Pinhole cameras whose round trip lands a hair outside the image: nothing may go black.
+#[test]
+fn pinhole_maps_have_no_black_border() {
+    for (k, size) in [
+        // KITTI-like and EuRoC-like absolute pinholes
+        (
+            Intrinsics {
+                fx: 718.856,
+                fy: 718.856,
+                cx: 607.1928,
+                cy: 185.2157,
+            },
+            ImageSize::new(1241, 376),
+        ),
+        (
+            Intrinsics {
+                fx: 458.654,
+                fy: 457.296,
+                cx: 367.215,
+                cy: 248.375,
+            },
+            ImageSize::new(752, 480),
+        ),
+        (
+            Intrinsics {
+                fx: 0.1 * 1280.0 + 0.3,
+                fy: 913.1,
+                cx: 0.7 * 1279.0 / 3.0,
+                cy: 0.1,
+            },
+            ImageSize::new(1280, 720),
+        ),
+    ] {
+        let m = CameraModel::Pinhole(k);
+        let img = Image::from_fn(size.width, size.height, |x, y| {
+            ((x * 7 + y * 13) % 256) as u8
+        });
+        let map = RectifyMap::for_mode(&m, size, &OutputMode::None, size).unwrap();
+        assert_eq!(map.remap_u8(&img).unwrap(), img);
+        for out in [
+            ImageSize::new(1920, 704),
+            ImageSize::new(640, 480),
+            ImageSize::new(3000, 2000),
+            size,
+        ] {
+            for mode in [OutputMode::Crop, OutputMode::Full, OutputMode::None] {
+                let map = RectifyMap::for_mode(&m, size, &mode, out).unwrap();
+                assert_eq!(map.invalid_count(), 0, "{k:?} {mode} {out}");
+            }
+        }
+    }
+}
+
+/// `crop` of the distorted models finds every side to its exact limit: moving any one side
+/// outward by a millionth leaves an output pixel without a source.
+#[test]
+fn crop_sides_are_each_at_their_exact_limit() {
+    for (model, size) in all_models() {
+        if model.is_pinhole() || matches!(model, CameraModel::Fov { .. }) {
+            continue;
+        }
+        for out in [ImageSize::new(640, 480), size] {
+            let k = output_intrinsics(&model, size, &OutputMode::Crop, out).unwrap();
+            let rect = [
+                -k.cx / k.fx,
+                (out.width as f64 - 1.0 - k.cx) / k.fx,
+                -k.cy / k.fy,
+                (out.height as f64 - 1.0 - k.cy) / k.fy,
+            ];
+            for side in 0..4 {
+                let mut r = rect;
+                r[side] *= 1.0 + 1e-6;
+                let fx = (out.width as f64 - 1.0) / (r[1] - r[0]);
+                let fy = (out.height as f64 - 1.0) / (r[3] - r[2]);
+                let grown = Intrinsics {
+                    fx,
+                    fy,
+                    cx: -r[0] * fx,
+                    cy: -r[2] * fy,
+                };
+                let map = RectifyMap::new(&model, size, grown, out).unwrap();
+                assert!(
+                    map.invalid_count() > 0,
+                    "{} to {out}: side {side} could grow",
+                    model.name()
+                );
+            }
+        }
+    }
 }

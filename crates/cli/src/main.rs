@@ -30,7 +30,7 @@ enum Command {
     /// What a sequence folder holds: frames, timing, exposures, camera, calibration, ground truth.
     Info(cmd::info::Args),
     /// Rectify a sequence to a pinhole camera (and undo response and vignetting) as a new sequence.
-    Rectify(cmd::rectify::Args),
+    Rectify(cmd::rectify::Command),
     /// Calibrate the response (and the vignette) of your own camera.
     Calib(cmd::calib::Args),
     /// Score one trajectory with the paper's loop-closure drift metrics.
@@ -49,7 +49,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => cmd::demo::run(&args),
         Command::Camera(args) => cmd::camera::run(&args),
         Command::Info(args) => cmd::info::run(&args),
-        Command::Rectify(args) => cmd::rectify::run(&args),
+        Command::Rectify(args) => cmd::rectify::run_command(&args),
         Command::Calib(args) => cmd::calib::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),

@@ -59,14 +59,19 @@ fn bad_files_name_file_and_line_and_exit_non_zero() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("missing.txt"));
 
+    // `none` on a distorted camera: the raw image passes through, with warnings
     let o = monovo(&[
         "camera",
         &repo_file("data/camera_narrow.txt"),
         "--output",
         "none",
     ]);
-    assert!(!o.status.success());
-    assert!(stderr(&o).contains("none"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("distortion is ignored") && e.contains("resized"),
+        "{e}"
+    );
 
     let o = monovo(&[
         "camera",
@@ -75,4 +80,36 @@ fn bad_files_name_file_and_line_and_exit_non_zero() {
         "640",
     ]);
     assert_eq!(o.status.code(), Some(2), "clap usage error");
+}
+
+/// Lines after line 4 (a stereo baseline, a second camera) are ignored like DSO does: named
+/// in the text output, warned about on stderr, and `--json` keeps its exact keys.
+#[test]
+fn extra_lines_are_ignored_named_and_warned_about() {
+    let dir = temp_dir("camera_extra_lines");
+    let p = dir.join("camera.txt");
+    std::fs::write(
+        &p,
+        "\u{feff}Pinhole 718.856 718.856 607.1928 185.2157 0 0 0 0\r\n1241 376\r\ncrop\r\n1241 376\r\n0.537165\r\n",
+    )
+    .unwrap();
+    let o = monovo(&["camera", p.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = stdout(&o);
+    assert!(
+        s.contains("line 5: 0.537165") && s.contains("invalid (black) pixels: 0"),
+        "{s}"
+    );
+    let e = stderr(&o);
+    assert!(
+        e.contains("camera.txt")
+            && e.contains("line 5 is ignored")
+            && e.contains("byte-order mark"),
+        "{e}"
+    );
+    let o = monovo(&["camera", p.to_str().unwrap(), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v.as_object().unwrap().len(), 6);
+    assert_eq!(v["fx"].as_f64().unwrap(), 718.856);
+    assert_eq!(v["cx"].as_f64().unwrap(), 607.1928);
 }

@@ -253,3 +253,136 @@ fn bad_inputs_give_one_line_errors_and_no_output() {
     std::fs::write(s.join("times.txt"), two).unwrap();
     expect_clean_failure(&s, &["--irradiance"], &["times.txt", "exposure"]);
 }
+
+/// `--photometric` without vignette.png undoes the response alone (V = 1), with a warning.
+#[test]
+fn photometric_without_vignette_corrects_the_response_alone() {
+    let s = copy_of("rectify_no_vignette");
+    std::fs::remove_file(s.join("vignette.png")).unwrap();
+    let out = s.parent().unwrap().join("out");
+    let o = monovo(&[
+        "rectify",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--photometric",
+        "--output",
+        "none",
+        "--size",
+        "1280x1024",
+        "--depth",
+        "16",
+        "--scale",
+        "100",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("no vignette.png") && e.contains("V = 1"), "{e}");
+    let raw = Sequence::open(&s).unwrap();
+    let u = photometric::InverseResponse::parse(
+        &std::fs::read_to_string(s.join("pcalib.txt")).unwrap(),
+    )
+    .unwrap();
+    let frame = raw.decode(2).unwrap();
+    let (img, _) = dataset_io::read_gray16(&out.join("images/00002.png")).unwrap();
+    for (i, (&v, &o)) in frame.data().iter().zip(img.data()).enumerate().step_by(97) {
+        let want = (100.0 * u.get(v)).min(65535.0);
+        // the fused path holds U in a 16-bit table: within one unit plus 1e-4 relative
+        assert!(
+            (o as f64 - want).abs() <= 1.0 + 1e-4 * want,
+            "pixel {i}: {o} vs {want}"
+        );
+    }
+}
+
+/// A sequence of 16-bit PNG frames from a 12-bit sensor, with a 4096-value response: the
+/// geometric path keeps the values, the photometric path applies U exactly, and a value
+/// beyond 12 bits is refused.
+#[test]
+fn sixteen_bit_frames_with_an_embedded_bit_depth() {
+    let d = temp_dir("rectify_16bit");
+    let s = d.join("seq");
+    std::fs::create_dir_all(s.join("images")).unwrap();
+    let (w, h) = (40usize, 30usize);
+    let mut times = String::new();
+    for i in 0..3usize {
+        let vals: Vec<u16> = (0..w * h)
+            .map(|p| ((p * 37 + i * 11) % 4096) as u16)
+            .collect();
+        let png = dataset_io::encode_png_u16(w, h, &vals, dataset_io::PngSpeed::Fast).unwrap();
+        std::fs::write(s.join(format!("images/{i:05}.png")), png).unwrap();
+        times += &format!("{i:05} {i}.5 10\n");
+    }
+    std::fs::write(s.join("times.txt"), times).unwrap();
+    std::fs::write(
+        s.join("camera.txt"),
+        "Pinhole 30 30 19.5 14.5 0\n40 30\nnone\n40 30\n",
+    )
+    .unwrap();
+    let table: Vec<String> = (0..4096)
+        .map(|k| format!("{}", 2.0 * k as f64 + 1.0))
+        .collect();
+    std::fs::write(s.join("pcalib.txt"), table.join(" ")).unwrap();
+
+    let out = d.join("geo");
+    let o = monovo(&[
+        "rectify",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--depth",
+        "16",
+        "--bit-depth",
+        "12",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let raw = Sequence::open(&s).unwrap();
+    assert_eq!(raw.bits_per_sample(), 16);
+    let (img, _) = dataset_io::read_gray16(&out.join("images/00001.png")).unwrap();
+    match raw.decode_native(1).unwrap() {
+        dataset_io::GrayImage::U16(src) => assert_eq!(img, src),
+        other => panic!("{other:?}"),
+    }
+
+    let out = d.join("lin");
+    let o = monovo(&[
+        "rectify",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--photometric",
+        "--depth",
+        "16",
+        "--bit-depth",
+        "12",
+        "--scale",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (img, _) = dataset_io::read_gray16(&out.join("images/00001.png")).unwrap();
+    for (p, &o) in img.data().iter().enumerate() {
+        let v = (p * 37 + 11) % 4096;
+        assert_eq!(o as f64, 2.0 * v as f64 + 1.0, "pixel {p}");
+    }
+
+    // a value of 13 bits with --bit-depth 12
+    let vals: Vec<u16> = vec![5000; w * h];
+    let png = dataset_io::encode_png_u16(w, h, &vals, dataset_io::PngSpeed::Fast).unwrap();
+    std::fs::write(s.join("images/00002.png"), png).unwrap();
+    let out = d.join("bad");
+    let o = monovo(&[
+        "rectify",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--bit-depth",
+        "12",
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("5000") && e.contains("--bit-depth 12") && e.contains("00002"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

@@ -42,6 +42,9 @@ pub use png::{
     encode_jpeg_gray, encode_png_u16, encode_png_u8, write_png_u16, write_png_u8, PngSpeed,
 };
 pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};
-pub use sequence::{decode_gray16, decode_gray8, read_gray16, read_gray8, Frame, Sequence};
+pub use sequence::{
+    decode_gray, decode_gray16, decode_gray8, decode_gray_map, read_gray16, read_gray8,
+    read_gray_map, Frame, GrayImage, NativeFrame, Sequence,
+};
 pub use times::{parse_times, times_text, TimeRow, Times};
 pub use writer::{write_images_zip, SequenceWriter};

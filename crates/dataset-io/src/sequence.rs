@@ -43,6 +43,49 @@ pub struct Frame {
     pub exposure_ms: Option<f64>,
 }
 
+/// A grey image with the sample type of its file: 8 bits (JPEG, 8-bit PNG/PGM) or 16 bits
+/// (16-bit PNG/PGM, values as stored).
+#[derive(Clone, Debug, PartialEq)]
+pub enum GrayImage {
+    /// 8 bits per pixel.
+    U8(Image<u8>),
+    /// 16 bits per pixel, the stored values unscaled.
+    U16(Image<u16>),
+}
+
+impl GrayImage {
+    /// Width and height.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            GrayImage::U8(i) => i.size(),
+            GrayImage::U16(i) => i.size(),
+        }
+    }
+
+    /// Bits per sample of the file: 8 or 16.
+    pub fn bits(&self) -> u32 {
+        match self {
+            GrayImage::U8(_) => 8,
+            GrayImage::U16(_) => 16,
+        }
+    }
+}
+
+/// One decoded frame at its file's own bit depth (see [`Sequence::process_native`]).
+#[derive(Clone, Debug)]
+pub struct NativeFrame {
+    /// Index in the sequence (0-based, in name order).
+    pub index: usize,
+    /// The image's name (zip entry or file name).
+    pub name: String,
+    /// The pixels, 8 or 16 bits.
+    pub image: GrayImage,
+    /// Timestamp in seconds (times.txt).
+    pub timestamp: f64,
+    /// Exposure in ms, when known.
+    pub exposure_ms: Option<f64>,
+}
+
 /// An opened, validated sequence.
 #[derive(Debug)]
 pub struct Sequence {
@@ -53,6 +96,7 @@ pub struct Sequence {
     times_path: PathBuf,
     camera: Option<CameraFile>,
     size: ImageSize,
+    bits: u32,
     /// `pcalib.txt`, if present.
     pub pcalib_path: Option<PathBuf>,
     /// `vignette.png`, if present.
@@ -130,6 +174,77 @@ pub fn decode_gray16(bytes: &[u8]) -> Result<(Image<u16>, bool), String> {
     Image::new(w, h, data)
         .map(|i| (i, sixteen))
         .map_err(|e| e.to_string())
+}
+
+/// Decodes JPEG, PNG or PGM bytes to grey at the file's own bit depth: 16-bit files keep
+/// their values (a 12-bit sensor's values stay in the low 12 bits), colour is converted to
+/// luma. The error text says what failed.
+pub fn decode_gray(bytes: &[u8]) -> Result<GrayImage, String> {
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        return decode_jpeg_gray8(bytes).map(GrayImage::U8);
+    }
+    let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let sixteen = matches!(
+        img.color(),
+        image::ColorType::L16
+            | image::ColorType::La16
+            | image::ColorType::Rgb16
+            | image::ColorType::Rgba16
+    );
+    let out = if sixteen {
+        Image::new(w, h, img.into_luma16().into_raw()).map(GrayImage::U16)
+    } else {
+        Image::new(w, h, img.into_luma8().into_raw()).map(GrayImage::U8)
+    };
+    out.map_err(|e| e.to_string())
+}
+
+/// Decodes a grey map such as vignette.png, as DESIGN.md and DSO read it: 8- or 16-bit grey;
+/// grey+alpha gives the grey channel (the alpha is ignored, as DSO's grey conversion drops
+/// it); an RGB(A) image whose three colour channels are equal everywhere is that grey (DSO's
+/// conversion to grey gives the same values). A colour image with different channels is
+/// refused: a vignette has one value per pixel. Returns the map (8-bit values unscaled) and
+/// its bits per sample (8 or 16).
+pub fn decode_gray_map(bytes: &[u8]) -> Result<(Image<u16>, u32), String> {
+    use image::DynamicImage as D;
+    let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let grey = |v: Vec<u16>, bits| {
+        Image::new(w, h, v)
+            .map(|i| (i, bits))
+            .map_err(|e| e.to_string())
+    };
+    let colour = |raw: Vec<u16>, n: usize, bits| {
+        if raw.chunks(n).all(|c| c[0] == c[1] && c[1] == c[2]) {
+            grey(raw.chunks(n).map(|c| c[0]).collect(), bits)
+        } else {
+            Err(format!(
+                "{} image whose red, green and blue differ; a vignette must be grey (8 or 16 bits, grey+alpha allowed)",
+                if n == 3 { "an RGB" } else { "an RGBA" }
+            ))
+        }
+    };
+    let widen = |v: Vec<u8>| v.into_iter().map(u16::from).collect::<Vec<u16>>();
+    match img {
+        D::ImageLuma8(i) => grey(widen(i.into_raw()), 8),
+        D::ImageLuma16(i) => grey(i.into_raw(), 16),
+        D::ImageLumaA8(i) => grey(i.into_raw().chunks(2).map(|c| c[0] as u16).collect(), 8),
+        D::ImageLumaA16(i) => grey(i.into_raw().chunks(2).map(|c| c[0]).collect(), 16),
+        D::ImageRgb8(i) => colour(widen(i.into_raw()), 3, 8),
+        D::ImageRgba8(i) => colour(widen(i.into_raw()), 4, 8),
+        D::ImageRgb16(i) => colour(i.into_raw(), 3, 16),
+        D::ImageRgba16(i) => colour(i.into_raw(), 4, 16),
+        _ => {
+            Err("unsupported sample format (32-bit float?); a vignette is 8- or 16-bit grey".into())
+        }
+    }
+}
+
+/// Reads a grey map such as vignette.png (see [`decode_gray_map`]).
+pub fn read_gray_map(path: &Path) -> Result<(Image<u16>, u32), DatasetError> {
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+    decode_gray_map(&bytes).map_err(|m| DatasetError::invalid(path, m))
 }
 
 /// Reads an image file as 16-bit grey (see [`decode_gray16`]).
@@ -237,12 +352,15 @@ impl Sequence {
             times_path,
             camera: None,
             size: ImageSize::new(0, 0),
+            bits: 8,
             pcalib_path: optional(dir, "pcalib.txt"),
             vignette_path: optional(dir, "vignette.png"),
             ground_truth_path: optional(dir, "groundtruthSync.txt"),
         };
-        let first = seq.decode(0)?;
-        seq.size = ImageSize::new(first.width(), first.height());
+        let first = seq.decode_native(0)?;
+        let (fw, fh) = first.size();
+        seq.size = ImageSize::new(fw, fh);
+        seq.bits = first.bits();
         let camera_path = dir.join("camera.txt");
         if camera_path.is_file() {
             let cam = CameraFile::parse(&read_text(&camera_path)?)
@@ -299,6 +417,11 @@ impl Sequence {
     /// Size of the images (from the first one).
     pub fn image_size(&self) -> ImageSize {
         self.size
+    }
+
+    /// Bits per sample of the image files (8, or 16 for 16-bit PNG/PGM), from the first.
+    pub fn bits_per_sample(&self) -> u32 {
+        self.bits
     }
 
     /// Whether the images come from images.zip.
@@ -369,6 +492,70 @@ impl Sequence {
             ));
         }
         Ok(img)
+    }
+
+    /// Decodes image `k` at its own bit depth (see [`decode_gray`]); the error names the
+    /// file or zip entry.
+    pub fn decode_native(&self, k: usize) -> Result<GrayImage, DatasetError> {
+        let bytes = self.raw(k)?;
+        let img = decode_gray(&bytes).map_err(|m| DatasetError::invalid(self.label(k), m))?;
+        let (w, h) = img.size();
+        if self.size.width != 0 && (w, h) != (self.size.width, self.size.height) {
+            return Err(DatasetError::invalid(
+                self.label(k),
+                format!("is {w}x{h}, the sequence's images are {}", self.size),
+            ));
+        }
+        if self.size.width != 0 && img.bits() != self.bits {
+            return Err(DatasetError::invalid(
+                self.label(k),
+                format!(
+                    "has {} bits per pixel, the sequence's first image has {}",
+                    img.bits(),
+                    self.bits
+                ),
+            ));
+        }
+        Ok(img)
+    }
+
+    /// Frame `k` at its own bit depth.
+    pub fn frame_native(&self, k: usize) -> Result<NativeFrame, DatasetError> {
+        let image = self.decode_native(k)?;
+        let row = &self.times.rows[k];
+        Ok(NativeFrame {
+            index: k,
+            name: self.names[k].clone(),
+            image,
+            timestamp: row.timestamp,
+            exposure_ms: row.exposure_ms,
+        })
+    }
+
+    /// [`Sequence::process`] with frames at their own bit depth (8 or 16 bits).
+    pub fn process_native<T, E, W, S>(
+        &self,
+        indices: &[usize],
+        chunk: usize,
+        work: W,
+        mut sink: S,
+    ) -> Result<(), E>
+    where
+        T: Send,
+        E: From<DatasetError> + Send,
+        W: Fn(NativeFrame) -> Result<T, E> + Sync,
+        S: FnMut(T) -> Result<(), E>,
+    {
+        for part in indices.chunks(chunk.max(1)) {
+            let out: Vec<Result<T, E>> = part
+                .par_iter()
+                .map(|&k| work(self.frame_native(k)?))
+                .collect();
+            for r in out {
+                sink(r?)?;
+            }
+        }
+        Ok(())
     }
 
     /// Frame `k`: decoded image, timestamp and exposure.

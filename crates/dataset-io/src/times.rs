@@ -1,5 +1,8 @@
 //! `times.txt`: one line per image, `id timestamp_s exposure_ms`; two columns mean unknown
-//! exposure.
+//! exposure. Read like DSO reads it (`%d %lf %f`): columns after the third are ignored, and
+//! so are a UTF-8 byte-order mark and CRLF line ends. A file of one column (KITTI's
+//! `times.txt`: timestamps only, which DSO misreads: `1.037359e-01` becomes id 1 and
+//! timestamp `.037359e-01`) is read as timestamps.
 
 use std::path::Path;
 
@@ -59,23 +62,34 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
     let mut rows: Vec<TimeRow> = Vec::new();
     let mut columns: Option<usize> = None;
     let mut prev: Option<f64> = None;
+    let mut warnings = Vec::new();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut extra_columns = 0usize;
     for (i, line) in text.lines().enumerate() {
         let no = i + 1;
         let t = line.trim();
         if t.is_empty() || t.starts_with('#') {
             continue;
         }
-        let f: Vec<&str> = t.split_whitespace().collect();
+        let mut f: Vec<&str> = t.split_whitespace().collect();
+        let comma = f.iter().any(|tok| {
+            let b = tok.as_bytes();
+            b.windows(3)
+                .any(|w| w[0].is_ascii_digit() && w[1] == b',' && w[2].is_ascii_digit())
+        });
         let bad = |expected: &str| DatasetError::Parse {
             path: path.to_path_buf(),
             line: no,
-            expected: expected.into(),
+            expected: if comma {
+                format!("{expected} (the decimal separator must be '.', not ',')")
+            } else {
+                expected.into()
+            },
             found: excerpt(t),
         };
-        if f.len() != 2 && f.len() != 3 {
-            return Err(bad(
-                "`id timestamp_s exposure_ms` (3 columns) or `id timestamp_s`",
-            ));
+        if f.len() > 3 {
+            extra_columns += 1;
+            f.truncate(3);
         }
         if let Some(c) = columns {
             if c != f.len() {
@@ -83,11 +97,23 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
             }
         }
         columns = Some(f.len());
-        let timestamp = f[1]
+        // one column: timestamps only (KITTI), the id is the row number
+        let (id, t_col) = if f.len() == 1 {
+            (rows.len().to_string(), 0)
+        } else {
+            (f[0].to_string(), 1)
+        };
+        let timestamp = f[t_col]
             .parse::<f64>()
             .ok()
             .filter(|v| v.is_finite())
-            .ok_or_else(|| bad("a finite timestamp in seconds in column 2"))?;
+            .ok_or_else(|| {
+                bad(if f.len() == 1 {
+                    "`id timestamp_s exposure_ms` (3 columns), `id timestamp_s`, or a timestamp in seconds alone"
+                } else {
+                    "a finite timestamp in seconds in column 2"
+                })
+            })?;
         if let Some(p) = prev {
             if timestamp <= p {
                 return Err(bad(&format!(
@@ -106,12 +132,23 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
             None => None,
         };
         rows.push(TimeRow {
-            id: f[0].to_string(),
+            id,
             timestamp,
             exposure_ms,
         });
     }
-    let mut warnings = Vec::new();
+    if extra_columns > 0 {
+        warnings.push(format!(
+            "{}: {extra_columns} lines have more than 3 columns; the columns after `id timestamp exposure` are ignored, as DSO ignores them",
+            path.display()
+        ));
+    }
+    if columns == Some(1) {
+        warnings.push(format!(
+            "{}: one column: read as timestamps in seconds (KITTI's times.txt), exposures unknown; DSO misreads such a file (the digits before the '.' as the id, the rest as the timestamp)",
+            path.display()
+        ));
+    }
     // interpolate isolated zero exposures between two known ones
     for i in 1..rows.len().saturating_sub(1) {
         if rows[i].exposure_ms == Some(0.0) {

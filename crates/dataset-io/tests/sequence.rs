@@ -168,14 +168,101 @@ fn times_txt_rules() {
         ("0 1.0 5\n1 1.1\n", 2),
         ("0 x 5\n", 1),
         ("0 1.0 -1\n", 1),
-        ("0 1 2 3\n", 1),
         ("0 1.0 nan\n", 1),
+        ("0 1.0 5\n1.5\n", 2),
     ] {
         match parse_times(bad, p) {
             Err(DatasetError::Parse { line: l, .. }) => assert_eq!(l, line, "{bad}"),
             other => panic!("{bad}: {other:?}"),
         }
     }
+    // like DSO: columns after the third ignored (with a warning), BOM and CRLF fine
+    let t = parse_times("\u{feff}0 1.0 5 extra\r\n1 1.1 6 x\r\n", p).unwrap();
+    assert_eq!(t.rows.len(), 2);
+    assert_eq!(
+        (t.rows[0].id.as_str(), t.rows[1].exposure_ms),
+        ("0", Some(6.0))
+    );
+    assert!(
+        t.warnings[0].contains("more than 3 columns"),
+        "{:?}",
+        t.warnings
+    );
+    // KITTI: one timestamp per line
+    let t = parse_times("0.000000e+00\n1.037359e-01\n", p).unwrap();
+    assert_eq!(t.rows[1].timestamp, 0.1037359);
+    assert_eq!(t.rows[1].id, "1");
+    assert!(t.warnings[0].contains("KITTI"));
+    // a decimal comma gets a hint
+    let e = parse_times("00001 1659071542,71 16,7\n", p)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 1") && e.contains("decimal separator must be '.'"),
+        "{e}"
+    );
+}
+
+/// 16-bit PNG frames keep their values; vignettes of every real kind read as grey.
+#[test]
+fn native_bit_depth_and_grey_maps() {
+    use dataset_io::{decode_gray, decode_gray_map, encode_png_u16, GrayImage};
+    let vals: Vec<u16> = (0..12).map(|i| i * 300 + 7).collect();
+    let png = encode_png_u16(4, 3, &vals, PngSpeed::Fast).unwrap();
+    match decode_gray(&png).unwrap() {
+        GrayImage::U16(i) => assert_eq!(i.data(), &vals[..]),
+        other => panic!("{other:?}"),
+    }
+    let png8 = encode_png_u8(4, 3, 1, &[9u8; 12], PngSpeed::Fast).unwrap();
+    assert!(matches!(decode_gray(&png8).unwrap(), GrayImage::U8(_)));
+    assert_eq!(
+        decode_gray_map(&png).unwrap(),
+        (camera_model::Image::new(4, 3, vals).unwrap(), 16)
+    );
+    // grey stored as RGB is that grey; real colour is refused
+    let rgb: Vec<u8> = (0..12u8).flat_map(|v| [v, v, v]).collect();
+    let (g, bits) =
+        decode_gray_map(&encode_png_u8(4, 3, 3, &rgb, PngSpeed::Fast).unwrap()).unwrap();
+    assert_eq!((g.get(3, 2), bits), (Some(11), 8));
+    let mut colour = rgb.clone();
+    colour[4] = 200;
+    let e = decode_gray_map(&encode_png_u8(4, 3, 3, &colour, PngSpeed::Fast).unwrap()).unwrap_err();
+    assert!(e.contains("must be grey"), "{e}");
+}
+
+/// A sequence of 16-bit PNG frames reports 16 bits and decodes them unscaled.
+#[test]
+fn sixteen_bit_sequences() {
+    use dataset_io::{encode_png_u16, GrayImage};
+    let d = tmp("sixteen");
+    let dir = d.join("seq");
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    let mut times = String::new();
+    for i in 0..3u16 {
+        let vals: Vec<u16> = (0..64 * 48).map(|p| (p as u16 % 4096) + i).collect();
+        let png = encode_png_u16(64, 48, &vals, PngSpeed::Fast).unwrap();
+        std::fs::write(dir.join(format!("images/{i:05}.png")), png).unwrap();
+        times += &format!("{i:05} {}.0 10\n", i);
+    }
+    std::fs::write(dir.join("times.txt"), times).unwrap();
+    let s = Sequence::open(&dir).unwrap();
+    assert_eq!(s.bits_per_sample(), 16);
+    match s.decode_native(2).unwrap() {
+        GrayImage::U16(i) => assert_eq!(i.get(5, 0), Some(7)),
+        other => panic!("{other:?}"),
+    }
+    let mut seen = Vec::new();
+    s.process_native(
+        &[2, 0],
+        4,
+        |f| Ok::<_, DatasetError>((f.index, f.image.bits())),
+        |r| {
+            seen.push(r);
+            Ok(())
+        },
+    )
+    .unwrap();
+    assert_eq!(seen, vec![(2, 16), (0, 16)]);
 }
 
 #[test]

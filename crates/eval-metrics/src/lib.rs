@@ -64,6 +64,14 @@ pub enum EvalError {
         /// An excerpt of the line.
         found: String,
     },
+    /// A line whose numbers are written with a decimal comma (`0,5`).
+    #[error("line {line}: `{found}`: the decimal separator must be '.', not ','")]
+    DecimalComma {
+        /// 1-based line number.
+        line: usize,
+        /// An excerpt of the line.
+        found: String,
+    },
     /// Ground-truth timestamps that do not strictly increase.
     #[error(
         "line {line}: ground-truth timestamps must strictly increase, but {t} follows {previous}"

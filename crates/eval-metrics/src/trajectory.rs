@@ -59,8 +59,9 @@ fn excerpt(line: &str) -> String {
 }
 
 /// Iterates the data lines of a text: 1-based line number and content, skipping blank lines
-/// and `#` comments.
+/// and `#` comments (and a UTF-8 byte-order mark at the start).
 fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     text.lines().enumerate().filter_map(|(i, l)| {
         let t = l.trim();
         if t.is_empty() || t.starts_with('#') || t.starts_with("//") || t.starts_with('%') {
@@ -69,6 +70,30 @@ fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
             Some((i + 1, t))
         }
     })
+}
+
+/// The error for a line that did not parse: a hint about the decimal separator when the line
+/// has exactly `n` blank-separated words and some of them look like `0,5`.
+fn line_error(line_no: usize, line: &str, expected: &'static str, n: usize) -> EvalError {
+    let words: Vec<&str> = line.split_ascii_whitespace().collect();
+    let decimal_comma = words.len() == n
+        && words.iter().any(|w| {
+            w.as_bytes()
+                .windows(3)
+                .any(|t| t[0].is_ascii_digit() && t[1] == b',' && t[2].is_ascii_digit())
+        });
+    if decimal_comma {
+        EvalError::DecimalComma {
+            line: line_no,
+            found: excerpt(line),
+        }
+    } else {
+        EvalError::Parse {
+            line: line_no,
+            expected,
+            found: excerpt(line),
+        }
+    }
 }
 
 /// Parses exactly `N` numbers (or at least `N` when `allow_more`) separated by whitespace or
@@ -92,19 +117,13 @@ fn parse_fields<const N: usize>(
             count += 1;
             break;
         }
-        out[count] = tok.parse::<f64>().map_err(|_| EvalError::Parse {
-            line: line_no,
-            expected,
-            found: excerpt(line),
-        })?;
+        out[count] = tok
+            .parse::<f64>()
+            .map_err(|_| line_error(line_no, line, expected, N))?;
         count += 1;
     }
     if count != N {
-        return Err(EvalError::Parse {
-            line: line_no,
-            expected,
-            found: excerpt(line),
-        });
+        return Err(line_error(line_no, line, expected, N));
     }
     Ok(out)
 }

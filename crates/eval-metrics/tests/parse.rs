@@ -100,3 +100,27 @@ fn ground_truth_windows_follow_floor_and_ceil_of_half() {
     assert_eq!(gt.associate(2.0009, 0.001), Some(2));
     assert_eq!(gt.associate(2.5, 0.001), None);
 }
+
+/// A UTF-8 byte-order mark and CRLF do not matter; a decimal comma gets a hint; DSO's
+/// result.txt has double blanks (Eigen's column padding).
+#[test]
+fn byte_order_mark_crlf_double_blanks_and_decimal_commas() {
+    let t = parse_tum("\u{feff}# t x y z qx qy qz qw\r\n191.7 -6.0e-06  4.0e-07 0 0 0 0 1\r\n")
+        .unwrap();
+    assert_eq!(t.poses.len(), 1);
+    assert_eq!(t.poses[0].position, [-6.0e-06, 4.0e-07, 0.0]);
+    let gt = GroundTruth::parse("\u{feff}0 0 0 0 0 0 0 1\r\n1 1 0 0 0 0 0 1\r\n").unwrap();
+    assert_eq!(gt.len(), 2);
+    assert_eq!(
+        detect_format("\u{feff}1 0 0 4 0 1 0 5 0 0 1 6\n"),
+        TrajectoryFormat::Kitti
+    );
+    let e = parse_tum("1,5 0,1 0 0 0 0 0 1\n").unwrap_err();
+    assert!(matches!(e, EvalError::DecimalComma { line: 1, .. }), "{e}");
+    assert!(
+        e.to_string().contains("decimal separator must be '.'"),
+        "{e}"
+    );
+    let e = GroundTruth::parse("0 0 0 0 0 0 0 1\n1 0,5 0 0 0 0 0 1\n").unwrap_err();
+    assert!(matches!(e, EvalError::DecimalComma { line: 2, .. }), "{e}");
+}

@@ -12,6 +12,9 @@ use crate::{InverseResponse, PhotometricError, Vignette};
 pub struct Correction {
     map: Option<RectifyMap>,
     lut: [f32; 256],
+    /// `U` for every sample value of deeper frames, with its bit depth (see
+    /// [`Correction::with_bit_depth`]).
+    deep: Option<(u32, Vec<f32>)>,
     inv_v: Option<Vec<f32>>,
     in_size: (usize, usize),
     out_size: (usize, usize),
@@ -63,10 +66,98 @@ impl Correction {
         Ok(Correction {
             map,
             lut,
+            deep: None,
             inv_v,
             in_size,
             out_size,
         })
+    }
+
+    /// Prepares [`Correction::apply_u16`] for frames whose samples have `bits` bits (1 to
+    /// 16, in the low bits of a 16-bit image): `U` of every sample value, exact when the
+    /// response has `2^bits` values (see [`InverseResponse::table_for_bits`]). With
+    /// `mask_saturated` the brightest value `2^bits - 1` is invalid.
+    pub fn with_bit_depth(
+        mut self,
+        response: &InverseResponse,
+        bits: u32,
+        mask_saturated: bool,
+    ) -> Result<Correction, PhotometricError> {
+        let mut table: Vec<f32> = response
+            .table_for_bits(bits)?
+            .into_iter()
+            .map(|v| v as f32)
+            .collect();
+        if mask_saturated {
+            if let Some(last) = table.last_mut() {
+                *last = f32::NAN;
+            }
+        }
+        self.deep = Some((bits, table));
+        Ok(self)
+    }
+
+    /// Corrects one frame of 16-bit samples (bit depth as given to
+    /// [`Correction::with_bit_depth`], 16 if it was not called) into `out`: `U(I) / V`,
+    /// divided by the exposure in ms when given. `U` is applied on the raw grid, then the
+    /// frame is resampled (as DSO does). Invalid pixels are NaN; a sample beyond the bit
+    /// depth is an error.
+    pub fn apply_u16(
+        &self,
+        img: &Image<u16>,
+        exposure_ms: Option<f64>,
+        out: &mut Image<f32>,
+    ) -> Result<(), PhotometricError> {
+        let Some((bits, table)) = &self.deep else {
+            return Err(PhotometricError::Calibration(
+                "Correction::apply_u16 needs Correction::with_bit_depth first".into(),
+            ));
+        };
+        if img.size() != self.in_size {
+            return Err(PhotometricError::SizeMismatch {
+                what: "the image",
+                width: self.in_size.0,
+                height: self.in_size.1,
+                got_width: img.width(),
+                got_height: img.height(),
+            });
+        }
+        if out.size() != self.out_size {
+            return Err(PhotometricError::SizeMismatch {
+                what: "the output image",
+                width: self.out_size.0,
+                height: self.out_size.1,
+                got_width: out.width(),
+                got_height: out.height(),
+            });
+        }
+        let scale = match exposure_ms {
+            Some(t) if t > 0.0 && t.is_finite() => (1.0 / t) as f32,
+            Some(t) => return Err(PhotometricError::Exposure(t)),
+            None => 1.0,
+        };
+        let mut raw = Vec::with_capacity(img.data().len());
+        for &p in img.data() {
+            match table.get(p as usize) {
+                Some(u) => raw.push(*u),
+                None => {
+                    return Err(PhotometricError::SampleRange {
+                        value: p as u32,
+                        bits: *bits,
+                    })
+                }
+            }
+        }
+        let raw = Image::new(self.in_size.0, self.in_size.1, raw)?;
+        match &self.map {
+            Some(m) => m.remap_f32_into(&raw, out)?,
+            None => out.data_mut().copy_from_slice(raw.data()),
+        }
+        for (i, o) in out.data_mut().iter_mut().enumerate() {
+            let iv = self.inv_v.as_ref().map_or(1.0, |iv| iv[i]);
+            *o *= iv * scale;
+        }
+        Ok(())
     }
 
     /// Output size.
@@ -163,14 +254,31 @@ impl QuantizedCorrection {
         scale: f32,
         bits: u8,
     ) -> Result<QuantizedCorrection, PhotometricError> {
+        QuantizedCorrection::with_vignette(response, Some(vignette), map, scale, bits)
+    }
+
+    /// [`QuantizedCorrection::new`] with an optional vignette: without one `V = 1` (the
+    /// response alone is undone).
+    pub fn with_vignette(
+        response: &InverseResponse,
+        vignette: Option<&Vignette>,
+        map: RectifyMap,
+        scale: f32,
+        bits: u8,
+    ) -> Result<QuantizedCorrection, PhotometricError> {
         let in_size = map.input_size();
-        vignette.check_size(in_size.width, in_size.height)?;
         let u = response.values();
         let u_max = u[255];
         let lut = u.map(|v| (v / u_max * 65535.0).round().clamp(0.0, 65535.0) as u16);
-        let vv = vignette
-            .values()
-            .map(|x| if x > 0.0 { x } else { f32::NAN });
+        let vv = match vignette {
+            Some(vignette) => {
+                vignette.check_size(in_size.width, in_size.height)?;
+                vignette
+                    .values()
+                    .map(|x| if x > 0.0 { x } else { f32::NAN })
+            }
+            None => Image::filled(in_size.width, in_size.height, 1.0f32),
+        };
         let rv = map.remap_f32(&vv)?;
         let k = scale * (u_max / 65535.0 / 256.0) as f32;
         let base_gain = rv

@@ -16,16 +16,35 @@ pub enum PhotometricError {
         /// An excerpt.
         found: String,
     },
+    /// A number written with a decimal comma (`0,5`); pcalib.txt needs a '.'.
+    #[error("line {line}: `{token}`: the decimal separator must be '.', not ','")]
+    DecimalComma {
+        /// 1-based line.
+        line: usize,
+        /// The offending token.
+        token: String,
+    },
+    /// An inverse response with a number of values that is not a power of two from 256 to
+    /// 65536.
+    #[error("{}expected 2^k values (256 for 8-bit, 65536 for 16-bit images), found {found} numbers", at_line(*line))]
+    ValueCount {
+        /// 1-based line of the last value (0 when not from a file).
+        line: usize,
+        /// How many values there are.
+        found: usize,
+    },
     /// An inverse response that is not finite.
-    #[error("U({index}) = {value} is not a finite number")]
+    #[error("{}U({index}) = {value} is not a finite number", at_line(*line))]
     NotFinite {
         /// Grey value.
         index: usize,
         /// The value.
         value: f64,
+        /// 1-based line of the value in pcalib.txt (0 when not from a file).
+        line: usize,
     },
     /// An inverse response that is not strictly increasing (DSO rejects these).
-    #[error("the inverse response must strictly increase, but U({index}) = {value} <= U({}) = {previous}", index - 1)]
+    #[error("{}the inverse response must strictly increase, but U({index}) = {value} <= U({}) = {previous}", at_line(*line), index - 1)]
     NotIncreasing {
         /// Grey value.
         index: usize,
@@ -33,7 +52,20 @@ pub enum PhotometricError {
         value: f64,
         /// U at `index - 1`.
         previous: f64,
+        /// 1-based line of the value in pcalib.txt (0 when not from a file).
+        line: usize,
     },
+    /// A pixel value beyond the bit depth the frames are declared to have.
+    #[error("pixel value {value} does not fit in {bits} bits (at most {}); are the values in the high bits? then the bit depth is 16", (1u32 << bits) - 1)]
+    SampleRange {
+        /// The value found.
+        value: u32,
+        /// The declared bit depth.
+        bits: u32,
+    },
+    /// A bit depth outside 1..=16.
+    #[error("bit depth {0} is not supported (1 to 16 bits per pixel)")]
+    BitDepth(u32),
     /// A vignette that is zero everywhere or not finite.
     #[error("vignette: {0}")]
     Vignette(String),
@@ -60,4 +92,13 @@ pub enum PhotometricError {
     /// An error of the camera model (rectification).
     #[error(transparent)]
     Camera(#[from] camera_model::CameraError),
+}
+
+/// `"line N: "` for errors that came from a file line, nothing for line 0.
+fn at_line(line: usize) -> String {
+    if line > 0 {
+        format!("line {line}: ")
+    } else {
+        String::new()
+    }
 }

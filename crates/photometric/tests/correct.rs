@@ -146,3 +146,55 @@ fn fused_quantized_path_matches_the_float_path() {
         assert!((*a as f32 - *b as f32).abs() <= tol, "{a} {b} tol {tol}");
     }
 }
+
+/// 16-bit frames with an embedded bit depth: a 65536-value response is applied exactly to
+/// 16-bit samples, a 4096-value one exactly to 12-bit samples; values beyond the depth are an
+/// error, not garbage.
+#[test]
+fn deep_frames_are_corrected_exactly() {
+    let n = 65536usize;
+    let table: Vec<f64> = (0..n).map(|i| (i as f64).powf(1.5) + i as f64).collect();
+    let u = InverseResponse::from_values(table.clone()).unwrap();
+    let (w, h) = (6, 2);
+    let vig = Vignette::from_values(Image::from_fn(w, h, |x, _| 1.0 - 0.1 * x as f32)).unwrap();
+    let corr = Correction::new(&u, Some(&vig), None, (w, h), false)
+        .unwrap()
+        .with_bit_depth(&u, 16, false)
+        .unwrap();
+    let img = Image::from_fn(w, h, |x, y| (x * 10007 + y * 3 + 1) as u16);
+    let mut out = Image::filled(w, h, 0f32);
+    corr.apply_u16(&img, Some(2.0), &mut out).unwrap();
+    for y in 0..h {
+        for x in 0..w {
+            let want = table[img.get(x, y).unwrap() as usize]
+                / (2.0 * vig.values().get(x, y).unwrap() as f64);
+            let got = out.get(x, y).unwrap() as f64;
+            assert!((got - want).abs() <= 1e-6 * want.max(1.0), "{got} {want}");
+        }
+    }
+    // 12-bit samples with a 4096-value response: exact; a sample of 4096 is refused
+    let t12: Vec<f64> = (0..4096).map(|i| 3.0 * i as f64 + 1.0).collect();
+    let u12 = InverseResponse::from_values(t12).unwrap();
+    let corr = Correction::new(&u12, None, None, (w, h), false)
+        .unwrap()
+        .with_bit_depth(&u12, 12, false)
+        .unwrap();
+    let img = Image::from_fn(w, h, |x, y| (x * 700 + y) as u16);
+    corr.apply_u16(&img, None, &mut out).unwrap();
+    assert_eq!(out.get(5, 1), Some(3.0 * 3501.0 + 1.0));
+    let bad = Image::filled(w, h, 4096u16);
+    let e = corr.apply_u16(&bad, None, &mut out).unwrap_err();
+    assert!(
+        e.to_string().contains("4096") && e.to_string().contains("12 bits"),
+        "{e}"
+    );
+    // an 8-bit response on 16-bit samples: full range, 65535 -> U(255)
+    let lin = InverseResponse::linear();
+    let corr = Correction::new(&lin, None, None, (w, h), false)
+        .unwrap()
+        .with_bit_depth(&lin, 16, false)
+        .unwrap();
+    corr.apply_u16(&Image::filled(w, h, 65535u16), None, &mut out)
+        .unwrap();
+    assert_eq!(out.get(0, 0), Some(255.0));
+}

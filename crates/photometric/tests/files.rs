@@ -21,7 +21,14 @@ fn bad_pcalib_is_refused_with_the_reason() {
     vals[17] = "nan".into();
     let e = InverseResponse::parse(&vals.join(" ")).unwrap_err();
     assert!(
-        matches!(e, PhotometricError::NotFinite { index: 17, .. }),
+        matches!(
+            e,
+            PhotometricError::NotFinite {
+                index: 17,
+                line: 1,
+                ..
+            }
+        ),
         "{e}"
     );
     let mut vals: Vec<String> = (0..256).map(|k| k.to_string()).collect();
@@ -33,7 +40,11 @@ fn bad_pcalib_is_refused_with_the_reason() {
     );
     assert!(e.to_string().contains("U(100)"));
     let e = InverseResponse::parse("1 2 3").unwrap_err();
-    assert!(e.to_string().contains("3 numbers"), "{e}");
+    assert!(
+        e.to_string()
+            == "line 1: expected 2^k values (256 for 8-bit, 65536 for 16-bit images), found 3 numbers",
+        "{e}"
+    );
     let e = InverseResponse::parse(&format!(
         "{} x",
         (0..255)
@@ -50,7 +61,87 @@ fn bad_pcalib_is_refused_with_the_reason() {
             .join(" "),
     )
     .unwrap_err();
-    assert!(e.to_string().contains("more"), "{e}");
+    assert!(
+        matches!(
+            e,
+            PhotometricError::ValueCount {
+                line: 1,
+                found: 257
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("expected 2^k values"), "{e}");
+    let e = InverseResponse::parse("0 0,5 1").unwrap_err();
+    assert!(
+        e.to_string().contains("decimal separator must be '.'"),
+        "{e}"
+    );
+}
+
+/// 2^k values for k = 8..16: DM-VIO's TUM-VI calibration has 65536, for 16-bit frames.
+#[test]
+fn pcalib_of_any_power_of_two_from_256_to_65536() {
+    for k in 8..=16u32 {
+        let n = 1usize << k;
+        let text = (0..n)
+            .map(|i| format!("{}", (i as f64 / (n - 1) as f64).powf(2.0) * 1000.0))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let u = InverseResponse::parse(&text).unwrap();
+        assert_eq!((u.bits(), u.table().len()), (k, n));
+        assert_eq!(u.max_value(), 1000.0);
+        // the 8-bit table samples the curve at full range
+        for v in [0u8, 1, 100, 254, 255] {
+            let want = (v as f64 / 255.0).powf(2.0) * 1000.0;
+            let tol = if k == 8 || k == 16 { 1e-9 } else { 1e-2 };
+            assert!(
+                (u.get(v) - want).abs() < tol,
+                "k={k} v={v}: {} {want}",
+                u.get(v)
+            );
+        }
+        // exact lookup at the table's own depth
+        assert_eq!(u.table_for_bits(k).unwrap(), u.table());
+        let t12 = u.table_for_bits(12).unwrap();
+        assert_eq!(t12.len(), 4096);
+        assert_eq!((t12[0], t12[4095]), (0.0, 1000.0));
+        assert!(t12.windows(2).all(|w| w[1] > w[0]));
+    }
+    for n in [128usize, 300, 65537] {
+        let text = (0..n).map(|i| i.to_string()).collect::<Vec<_>>().join(" ");
+        let e = InverseResponse::parse(&text).unwrap_err();
+        assert!(
+            e.to_string().contains(&format!("found {n} numbers")),
+            "{n}: {e}"
+        );
+    }
+    assert!(InverseResponse::linear().table_for_bits(17).is_err());
+}
+
+/// A byte-order mark, CRLF, and a trailing line of text (DSSO's `vis_exponent: 1.0`) are
+/// read like DSO reads line 1.
+#[test]
+fn pcalib_reads_line_one_like_dso() {
+    let vals = (0..256)
+        .map(|k| k.to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let (u, notes) =
+        InverseResponse::parse_with_notes(&format!("\u{feff}{vals}\r\nvis_exponent: 1.000000\r\n"))
+            .unwrap();
+    assert_eq!(u, InverseResponse::linear());
+    assert_eq!(notes.len(), 2, "{notes:?}");
+    assert!(notes[1].contains("line 2") && notes[1].contains("vis_exponent"));
+    let (_, notes) = InverseResponse::parse_with_notes(&format!("{vals}\n\n")).unwrap();
+    assert!(notes.is_empty());
+    // a non-monotone table names the line
+    let e = InverseResponse::parse(&vals.replace(" 200 ", " 198 ")).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("line 1: the inverse response must strictly increase"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use camera_model::{
-    intrinsics_to_file_values, output_intrinsics, CameraFile, CameraModel, ImageSize, OutputMode,
+    intrinsics_to_file_values, output_notes, CameraFile, CameraModel, ImageSize, OutputMode,
     RectifyMap,
 };
 
@@ -16,10 +16,13 @@ Examples:
   monovo camera camera.txt --output full --size 640x480
   monovo camera camera.txt --output \"0.4 0.5333 0.5 0.5 0\" --json
 
+The file is read as DSO reads it: lines after line 4 are ignored (listed below the cameras),
+extra numbers after a model's parameters too; every such difference is a warning on stderr.
 The output pinhole follows DSO's conventions: `crop` is the largest view without black
-(invalid) pixels, `full` keeps the whole input field of view, `none` keeps a pinhole input
-as it is, and `fx fy cx cy 0` is an explicit pinhole relative to the output size (the
-paper's field-of-view experiments use f = fx * 640 at 640x480).")]
+(invalid) pixels (at least DSO's view on every side), `full` keeps the whole input field of
+view, `none` passes the raw image through with the input's fx fy cx cy (a distortion is
+ignored, as in DSO), and `fx fy cx cy 0` is an explicit pinhole relative to the output size
+(the paper's field-of-view experiments use f = fx * 640 at 640x480).")]
 pub struct Args {
     /// The camera.txt file (DSO/benchmark format, 4 lines).
     pub camera_txt: PathBuf,
@@ -57,8 +60,16 @@ pub fn run(args: &Args) -> Result<()> {
     let file = CameraFile::parse(&text).with_context(|| format!("{}", path.display()))?;
     let mode = args.output.unwrap_or(file.output);
     let out_size = args.size.unwrap_or(file.output_size);
-    let k = output_intrinsics(&file.input, file.input_size, &mode, out_size)
+    for w in
+        file.warnings
+            .iter()
+            .chain(&output_notes(&file.input, file.input_size, &mode, out_size))
+    {
+        eprintln!("monovo: warning: {}: {w}", path.display());
+    }
+    let map = RectifyMap::for_mode(&file.input, file.input_size, &mode, out_size)
         .with_context(|| format!("{}: output camera `{mode}` at {out_size}", path.display()))?;
+    let k = map.camera();
     if args.json {
         let obj = serde_json::json!({
             "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
@@ -67,7 +78,6 @@ pub fn run(args: &Args) -> Result<()> {
         println!("{obj}");
         return Ok(());
     }
-    let map = RectifyMap::new(&file.input, file.input_size, k, out_size)?;
     println!("input:  {} ({})", file.input, file.input_size);
     if let Some((h, v)) = model_field_of_view(&file.input, file.input_size) {
         println!("        field of view {h:.1} x {v:.1} degrees");
@@ -88,5 +98,13 @@ pub fn run(args: &Args) -> Result<()> {
         "        invalid (black) pixels: {invalid} ({:.2}%)",
         100.0 * invalid as f64 / out_size.pixels() as f64
     );
+    if !file.ignored_lines.is_empty() {
+        println!("ignored (DSO reads only lines 1-4):");
+        for (no, line) in &file.ignored_lines {
+            let shown: String = line.chars().take(70).collect();
+            let more = if shown.len() < line.len() { "..." } else { "" };
+            println!("        line {no}: {shown}{more}");
+        }
+    }
     Ok(())
 }

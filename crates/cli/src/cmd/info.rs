@@ -40,17 +40,29 @@ pub fn run(args: &Args) -> Result<()> {
         let out = camera_model::output_intrinsics(&c.input, c.input_size, &c.output, c.output_size);
         (c, out)
     });
+    let camera_path = args.sequence.join("camera.txt");
+    let mut warnings: Vec<String> = seq.times().warnings.clone();
+    if let Some(c) = seq.camera() {
+        let notes = camera_model::output_notes(&c.input, c.input_size, &c.output, c.output_size);
+        for w in c.warnings.iter().chain(&notes) {
+            warnings.push(format!("{}: {w}", camera_path.display()));
+        }
+    }
     let pcalib = seq.pcalib_path.as_ref().map(|p| {
         dataset_io::read_text(p)
             .map_err(anyhow::Error::from)
             .and_then(|t| {
-                photometric::InverseResponse::parse(&t).with_context(|| p.display().to_string())
+                photometric::InverseResponse::parse_with_notes(&t)
+                    .with_context(|| p.display().to_string())
             })
     });
+    if let (Some(p), Some(Ok((_, notes)))) = (&seq.pcalib_path, &pcalib) {
+        warnings.extend(notes.iter().map(|n| format!("{}: {n}", p.display())));
+    }
     let vignette = seq
         .vignette_path
         .as_ref()
-        .map(|p| dataset_io::read_gray16(p));
+        .map(|p| dataset_io::read_gray_map(p));
     let gt = seq
         .ground_truth_path
         .as_ref()
@@ -73,21 +85,22 @@ pub fn run(args: &Args) -> Result<()> {
                 "output_camera": out.as_ref().ok().map(|k| serde_json::json!({"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy})),
             })),
             "pcalib": pcalib.as_ref().map(|r| r.is_ok()),
-            "vignette": vignette.as_ref().map(|r| r.as_ref().ok().map(|(i, s)| serde_json::json!({"width": i.width(), "height": i.height(), "bits": if *s { 16 } else { 8 }}))),
+            "vignette": vignette.as_ref().map(|r| r.as_ref().ok().map(|(i, bits)| serde_json::json!({"width": i.width(), "height": i.height(), "bits": bits}))),
             "ground_truth": gt.as_ref().and_then(|r| r.as_ref().ok()).map(|g| {
                 let (s, e) = g.segment_sizes();
                 serde_json::json!({"rows": g.len(), "start_segment": s, "end_segment": e})
             }),
-            "warnings": seq.times().warnings,
+            "warnings": warnings,
         });
         println!("{obj}");
         return Ok(());
     }
     println!("sequence:     {}", args.sequence.display());
     println!(
-        "images:       {} frames of {} in {}",
+        "images:       {} frames of {}, {}-bit, in {}",
         n,
         size,
+        seq.bits_per_sample(),
         if seq.is_zipped() {
             "images.zip"
         } else {
@@ -108,17 +121,18 @@ pub fn run(args: &Args) -> Result<()> {
         None => println!("camera:       no camera.txt"),
     }
     match &pcalib {
-        Some(Ok(_)) => println!("pcalib.txt:   valid inverse response"),
+        Some(Ok((u, _))) => println!(
+            "pcalib.txt:   valid inverse response, {} values ({}-bit)",
+            u.table().len(),
+            u.bits()
+        ),
         Some(Err(e)) => println!("pcalib.txt:   INVALID: {e:#}"),
         None => println!("pcalib.txt:   absent"),
     }
     match &vignette {
-        Some(Ok((img, sixteen))) => println!(
-            "vignette.png: {}x{}, {}-bit",
-            img.width(),
-            img.height(),
-            if *sixteen { 16 } else { 8 }
-        ),
+        Some(Ok((img, bits))) => {
+            println!("vignette.png: {}x{}, {bits}-bit", img.width(), img.height(),)
+        }
         Some(Err(e)) => println!("vignette.png: INVALID: {e}"),
         None => println!("vignette.png: absent"),
     }
@@ -133,7 +147,7 @@ pub fn run(args: &Args) -> Result<()> {
         Some(Err(e)) => println!("ground truth: INVALID: {e:#}"),
         None => println!("ground truth: absent"),
     }
-    for w in &seq.times().warnings {
+    for w in &warnings {
         println!("warning:      {w}");
     }
     Ok(())

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use camera_model::{CameraFile, Image, ImageSize, OutputMode, RectifyMap};
-use dataset_io::{PngSpeed, Sequence, SequenceWriter, TimeRow};
+use camera_model::{output_notes, CameraFile, Image, ImageSize, OutputMode, RectifyMap};
+use dataset_io::{GrayImage, PngSpeed, Sequence, SequenceWriter, TimeRow};
 use photometric::{
     quantize_u16, quantize_u8, Correction, InverseResponse, QuantizedCorrection, Vignette,
 };
@@ -14,22 +14,6 @@ use crate::progress;
 
 /// Arguments of `monovo rectify`.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "\
-Examples:
-  monovo rectify sequence_01 -o seq01_rect                          # camera.txt's output (crop 640x480)
-  monovo rectify sequence_01 -o seq01_f300 --output \"0.46875 0.625 0.5 0.5 0\" --size 640x480
-  monovo rectify sequence_01 -o seq01_small --size 424x320           # another resolution
-  monovo rectify sequence_01 -o seq01_bwd --reverse                  # backwards playback
-  monovo rectify sequence_01 -o seq01_lin --photometric --depth 16   # undo response and vignette
-
-OUT is a new sequence folder that monovo and DSO read: PNG frames in images/ (or images.zip
-with --zip), times.txt and a pinhole camera.txt. Without --photometric, pcalib.txt is copied
-and the vignette is rectified into vignette.png, so DSO can still correct the frames itself.
-With --photometric each pixel is U(I)/V times a scale (printed; chosen so that nothing clips),
-and with --irradiance also divided by the exposure time (times.txt then lists exposure 1).
---reverse writes frames in backwards playback order, renumbered, with timestamps 2e9 - t so
-that they increase (the benchmark's convention for backwards runs, understood by
-`monovo eval`). OUT must not exist unless --force; a failed run leaves no OUT behind.")]
 pub struct Args {
     /// The sequence folder.
     pub sequence: PathBuf,
@@ -74,6 +58,38 @@ pub struct Args {
     pub json: bool,
 }
 
+/// The `monovo rectify` command line: [`Args`] and the bit depth of 16-bit input frames.
+#[derive(clap::Args, Debug)]
+#[command(after_help = "\
+Examples:
+  monovo rectify sequence_01 -o seq01_rect                          # camera.txt's output (crop 640x480)
+  monovo rectify sequence_01 -o seq01_f300 --output \"0.46875 0.625 0.5 0.5 0\" --size 640x480
+  monovo rectify sequence_01 -o seq01_small --size 424x320           # another resolution
+  monovo rectify sequence_01 -o seq01_bwd --reverse                  # backwards playback
+  monovo rectify sequence_01 -o seq01_lin --photometric --depth 16   # undo response and vignette
+
+OUT is a new sequence folder that monovo and DSO read: PNG frames in images/ (or images.zip
+with --zip), times.txt and a pinhole camera.txt. Without --photometric, pcalib.txt is copied
+and the vignette is rectified into vignette.png, so DSO can still correct the frames itself.
+With --photometric each pixel is U(I)/V times a scale (printed; chosen so that nothing clips),
+and with --irradiance also divided by the exposure time (times.txt then lists exposure 1).
+Without vignette.png, --photometric undoes the response alone (V = 1, with a warning).
+pcalib.txt may hold 2^k values (256 for 8-bit frames, 65536 for 16-bit); 16-bit PNG frames
+are read unscaled, and --bit-depth 10 or 12 says that their values use only the low bits;
+the response is looked up exactly at its own bit depth, by full range otherwise.
+--reverse writes frames in backwards playback order, renumbered, with timestamps 2e9 - t so
+that they increase (the benchmark's convention for backwards runs, understood by
+`monovo eval`). OUT must not exist unless --force; a failed run leaves no OUT behind.")]
+pub struct Command {
+    /// The arguments shared with the library half (see [`Args`]).
+    #[command(flatten)]
+    pub args: Args,
+    /// Bits per pixel of 16-bit input frames that hold fewer (values in the low bits, e.g.
+    /// 10 or 12 for such sensors); default: 16 for 16-bit frames, 8 for 8-bit frames.
+    #[arg(long, value_name = "BITS", value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub bit_depth: Option<u32>,
+}
+
 fn parse_depth(s: &str) -> Result<u8, String> {
     match s {
         "8" => Ok(8),
@@ -113,10 +129,28 @@ enum Pixels {
     Photometric(Box<Correction>, f32),
     /// The fused one-pass path.
     Fast(Box<QuantizedCorrection>, f32),
+    /// 16-bit input frames: `U` applied exactly at their bit depth, then resampled.
+    Deep(Box<Correction>, f32),
 }
 
-/// Runs `monovo rectify`.
+/// Scales a `bits`-bit sample value to the full range of `max` (8 or 16 bits out).
+fn rescale_sample(v: u16, bits: u32, max: f32) -> u16 {
+    let top = ((1u32 << bits) - 1) as f32;
+    (v as f32 * max / top).round().clamp(0.0, max) as u16
+}
+
+/// Runs `monovo rectify` (frames at their own bit depth).
 pub fn run(args: &Args) -> Result<()> {
+    run_with_bit_depth(args, None)
+}
+
+/// Runs the `monovo rectify` command line.
+pub fn run_command(cmd: &Command) -> Result<()> {
+    run_with_bit_depth(&cmd.args, cmd.bit_depth)
+}
+
+/// Runs `monovo rectify`; `bit_depth` is the number of bits used by 16-bit input frames.
+pub fn run_with_bit_depth(args: &Args, bit_depth: Option<u32>) -> Result<()> {
     let started = Instant::now();
     let seq = Sequence::open(&args.sequence)?;
     let Some(cam) = seq.camera() else {
@@ -127,6 +161,23 @@ pub fn run(args: &Args) -> Result<()> {
     };
     let mode = args.camera.unwrap_or(cam.output);
     let out_size = args.size.unwrap_or(cam.output_size);
+    let camera_path = args.sequence.join("camera.txt");
+    for w in cam
+        .warnings
+        .iter()
+        .chain(&output_notes(&cam.input, cam.input_size, &mode, out_size))
+    {
+        eprintln!("monovo: warning: {}: {w}", camera_path.display());
+    }
+    let in_bits = seq.bits_per_sample();
+    let bits = bit_depth.unwrap_or(in_bits);
+    if in_bits == 8 && bits != 8 {
+        bail!(
+            "--bit-depth {bits}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames whose values use fewer bits",
+            args.sequence.display()
+        );
+    }
+    let deep = in_bits == 16;
     let map =
         RectifyMap::for_mode(&cam.input, cam.input_size, &mode, out_size).with_context(|| {
             format!(
@@ -142,15 +193,19 @@ pub fn run(args: &Args) -> Result<()> {
     let indices = seq.indices(range, args.reverse);
     let photometric = args.photometric || args.irradiance;
     let response = match &seq.pcalib_path {
-        Some(p) => Some(
-            InverseResponse::parse(&dataset_io::read_text(p)?)
-                .with_context(|| p.display().to_string())?,
-        ),
+        Some(p) => {
+            let (u, notes) = InverseResponse::parse_with_notes(&dataset_io::read_text(p)?)
+                .with_context(|| p.display().to_string())?;
+            for n in notes {
+                eprintln!("monovo: warning: {}: {n}", p.display());
+            }
+            Some(u)
+        }
         None => None,
     };
     let vignette = match &seq.vignette_path {
         Some(p) => {
-            let (img, _) = dataset_io::read_gray16(p)?;
+            let (img, _) = dataset_io::read_gray_map(p)?;
             let v = Vignette::from_u16(&img).with_context(|| p.display().to_string())?;
             let (w, h) = v.size();
             if (w, h) != (seq.image_size().width, seq.image_size().height) {
@@ -178,34 +233,40 @@ pub fn run(args: &Args) -> Result<()> {
                 args.sequence.display()
             );
         };
-        let Some(vig) = &vignette else {
-            bail!(
-                "{}: --photometric needs vignette.png",
+        if vignette.is_none() {
+            eprintln!(
+                "monovo: warning: {}: no vignette.png: undoing the response alone (V = 1); DSO refuses its photometric mode without a vignette",
                 args.sequence.display()
             );
-        };
+        }
         let corr = Correction::new(
             resp,
-            Some(vig),
+            vignette.as_ref(),
             Some(map.clone()),
             (seq.image_size().width, seq.image_size().height),
             args.mask_saturated,
         )?;
-        // largest value: U(255) / (min V [* t_min])
+        // largest value: U(white) / (min V [* t_min])
         let t_min = if args.irradiance {
             seq.times().exposure_range().map_or(1.0, |r| r.0)
         } else {
             1.0
         };
-        let max_value = resp.values()[255] as f32 / (vig.min_positive() * t_min as f32);
+        let v_min = vignette.as_ref().map_or(1.0, |v| v.min_positive());
+        let max_value = resp.max_value() as f32 / (v_min * t_min as f32);
         let scale = args.scale.unwrap_or(max16 / max_value);
-        if args.mask_saturated {
+        if deep {
+            Pixels::Deep(
+                Box::new(corr.with_bit_depth(resp, bits, args.mask_saturated)?),
+                scale,
+            )
+        } else if args.mask_saturated {
             Pixels::Photometric(Box::new(corr), scale)
         } else {
             Pixels::Fast(
-                Box::new(QuantizedCorrection::new(
+                Box::new(QuantizedCorrection::with_vignette(
                     resp,
-                    vig,
+                    vignette.as_ref(),
                     map.clone(),
                     scale,
                     args.depth,
@@ -258,14 +319,24 @@ pub fn run(args: &Args) -> Result<()> {
     let depth = args.depth;
     let irradiance = args.irradiance;
     let reverse = args.reverse;
-    seq.process(
+    let sample_max = (1u32 << bits) - 1;
+    seq.process_native(
         &indices,
         threads * 4,
         |frame| -> Result<(f64, Option<f64>, Vec<u8>)> {
             let (w, h) = (out_size.width, out_size.height);
-            let png = match &pixels {
-                Pixels::Geometric(m) => {
-                    let out = m.remap_u8(&frame.image)?;
+            let label = || format!("frame {} ({})", frame.index, frame.name);
+            if let GrayImage::U16(img) = &frame.image {
+                if let Some(v) = img.data().iter().find(|v| **v as u32 > sample_max) {
+                    bail!(
+                        "{}: pixel value {v} does not fit in --bit-depth {bits} (at most {sample_max}); are the values in the high bits? then the bit depth is 16",
+                        label()
+                    );
+                }
+            }
+            let png = match (&pixels, &frame.image) {
+                (Pixels::Geometric(m), GrayImage::U8(img)) => {
+                    let out = m.remap_u8(img)?;
                     if depth == 16 {
                         let wide: Vec<u16> = out.data().iter().map(|v| *v as u16 * 257).collect();
                         dataset_io::encode_png_u16(w, h, &wide, PngSpeed::Fast)?
@@ -273,40 +344,49 @@ pub fn run(args: &Args) -> Result<()> {
                         dataset_io::encode_png_u8(w, h, 1, out.data(), PngSpeed::Fast)?
                     }
                 }
-                Pixels::Fast(c, _) => {
+                (Pixels::Geometric(m), GrayImage::U16(img)) => {
+                    let out = m.remap_u16(img)?;
+                    if depth == 16 {
+                        // the values keep their bit depth
+                        dataset_io::encode_png_u16(w, h, out.data(), PngSpeed::Fast)?
+                    } else {
+                        let narrow: Vec<u8> = out
+                            .data()
+                            .iter()
+                            .map(|v| rescale_sample(*v, bits, 255.0) as u8)
+                            .collect();
+                        dataset_io::encode_png_u8(w, h, 1, &narrow, PngSpeed::Fast)?
+                    }
+                }
+                (Pixels::Fast(c, _), GrayImage::U8(img)) => {
                     let exposure = if irradiance { frame.exposure_ms } else { None };
                     if depth == 16 {
                         let mut out = Image::filled(w, h, 0u16);
-                        c.apply(&frame.image, exposure, &mut out)?;
+                        c.apply(img, exposure, &mut out)?;
                         dataset_io::encode_png_u16(w, h, out.data(), PngSpeed::Fast)?
                     } else {
                         let mut out = Image::filled(w, h, 0u8);
-                        c.apply(&frame.image, exposure, &mut out)?;
+                        c.apply(img, exposure, &mut out)?;
                         dataset_io::encode_png_u8(w, h, 1, out.data(), PngSpeed::Fast)?
                     }
                 }
-                Pixels::Photometric(c, scale) => {
+                (Pixels::Photometric(c, scale), GrayImage::U8(img)) => {
                     let mut out = Image::filled(w, h, 0f32);
                     let exposure = if irradiance { frame.exposure_ms } else { None };
-                    c.apply(&frame.image, exposure, &mut out)
-                        .with_context(|| format!("frame {} ({})", frame.index, frame.name))?;
-                    if depth == 16 {
-                        dataset_io::encode_png_u16(
-                            w,
-                            h,
-                            quantize_u16(&out, *scale).data(),
-                            PngSpeed::Fast,
-                        )?
-                    } else {
-                        dataset_io::encode_png_u8(
-                            w,
-                            h,
-                            1,
-                            quantize_u8(&out, *scale).data(),
-                            PngSpeed::Fast,
-                        )?
-                    }
+                    c.apply(img, exposure, &mut out).with_context(label)?;
+                    encode_float(&out, *scale, depth)?
                 }
+                (Pixels::Deep(c, scale), GrayImage::U16(img)) => {
+                    let mut out = Image::filled(w, h, 0f32);
+                    let exposure = if irradiance { frame.exposure_ms } else { None };
+                    c.apply_u16(img, exposure, &mut out).with_context(label)?;
+                    encode_float(&out, *scale, depth)?
+                }
+                (_, image) => bail!(
+                    "{}: {}-bit frame in a {in_bits}-bit sequence",
+                    label(),
+                    image.bits()
+                ),
             };
             let t = if reverse {
                 eval_metrics::BACKWARDS_EPOCH - frame.timestamp
@@ -339,7 +419,7 @@ pub fn run(args: &Args) -> Result<()> {
     let dir = writer.finish()?;
     let secs = started.elapsed().as_secs_f64();
     let scale = match &pixels {
-        Pixels::Photometric(_, s) | Pixels::Fast(_, s) => Some(*s),
+        Pixels::Photometric(_, s) | Pixels::Fast(_, s) | Pixels::Deep(_, s) => Some(*s),
         Pixels::Geometric(_) => None,
     };
     if args.json {
@@ -380,4 +460,14 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Quantises a corrected float frame to 8 or 16 bits.
+fn encode_float(out: &Image<f32>, scale: f32, depth: u8) -> Result<Vec<u8>> {
+    let (w, h) = out.size();
+    Ok(if depth == 16 {
+        dataset_io::encode_png_u16(w, h, quantize_u16(out, scale).data(), PngSpeed::Fast)?
+    } else {
+        dataset_io::encode_png_u8(w, h, 1, quantize_u8(out, scale).data(), PngSpeed::Fast)?
+    })
 }
