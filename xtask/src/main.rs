@@ -60,6 +60,9 @@ fn run() -> Result<()> {
         println!("{}", usage());
         return Ok(());
     };
+    if task == "response-study" {
+        return response::study();
+    }
     if task != "bench-synthetic" {
         bail!("unknown task `{task}`\n{}", usage());
     }
