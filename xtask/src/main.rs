@@ -7,6 +7,7 @@
 
 mod response;
 mod stages;
+mod vignette;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -45,6 +45,8 @@ pub struct Series {
     pub width: f64,
     /// Dashed line.
     pub dashed: bool,
+    /// A band: the area between `points` (lower edge) and these upper points, filled.
+    pub band_upper: Option<Vec<[f64; 2]>>,
 }
 
 impl Series {
@@ -56,6 +58,29 @@ impl Series {
             color,
             width: 2.0,
             dashed: false,
+            band_upper: None,
+        }
+    }
+
+    /// A filled band between `lower` and `upper` (same x values), in a light shade of
+    /// `color`.
+    pub fn band(
+        label: impl Into<String>,
+        lower: Vec<[f64; 2]>,
+        upper: Vec<[f64; 2]>,
+        color: Rgb,
+    ) -> Series {
+        Series {
+            label: label.into(),
+            points: lower,
+            color: [
+                ((color[0] as u16 + 2 * 255) / 3) as u8,
+                ((color[1] as u16 + 2 * 255) / 3) as u8,
+                ((color[2] as u16 + 2 * 255) / 3) as u8,
+            ],
+            width: 2.0,
+            dashed: false,
+            band_upper: Some(upper),
         }
     }
 
@@ -441,6 +466,28 @@ fn layout_chart(c: &Chart, area: [f64; 4], out: &mut Vec<Prim>) {
         vertical: true,
     });
     for s in &c.series {
+        if let Some(upper) = &s.band_upper {
+            // filled by vertical strokes one data step wide
+            let step = s
+                .points
+                .windows(2)
+                .map(|w| (tx(w[1][0]) - tx(w[0][0])).abs())
+                .fold(f64::INFINITY, f64::min)
+                .clamp(1.0, 6.0);
+            for (lo, hi) in s.points.iter().zip(upper) {
+                if [lo[0], lo[1], hi[1]].iter().all(|v| v.is_finite()) {
+                    let (x, y0, y1) = (tx(lo[0]), ty(lo[1]), ty(hi[1]));
+                    out.push(Prim::Polyline {
+                        pts: vec![[x, y0], [x, y1.min(y0 - 1.0)]],
+                        color: s.color,
+                        width: step + 0.5,
+                        dashed: false,
+                        clip: pr,
+                    });
+                }
+            }
+            continue;
+        }
         let mut run: Vec<[f64; 2]> = Vec::new();
         let flush = |run: &mut Vec<[f64; 2]>, out: &mut Vec<Prim>| {
             if run.len() >= 2 {

@@ -59,3 +59,41 @@ pub fn write_atomic_with(
     }
     Ok(())
 }
+
+/// Checks, before any work, that `path` can be written as an output file: an existing file
+/// is refused unless `force` (a folder always), and its folder must exist and accept a new
+/// file (tried with a temporary file, removed again).
+pub fn check_output_file(path: &Path, force: bool) -> Result<(), DatasetError> {
+    if path.is_dir() {
+        return Err(DatasetError::invalid(
+            path,
+            "is a folder; expected the path of a file to write",
+        ));
+    }
+    if path.exists() && !force {
+        return Err(DatasetError::Exists {
+            path: path.to_path_buf(),
+        });
+    }
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !parent.is_dir() {
+        return Err(DatasetError::invalid(
+            path,
+            format!("the folder {} does not exist", parent.display()),
+        ));
+    }
+    let probe = temp_sibling(path);
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(DatasetError::invalid(
+            path,
+            format!("cannot write in {}: {e}", parent.display()),
+        )),
+    }
+}

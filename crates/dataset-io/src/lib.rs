@@ -35,11 +35,12 @@ mod sequence;
 mod times;
 mod writer;
 
-pub use atomic::{read_text, temp_sibling, write_atomic, write_atomic_with};
+pub use atomic::{check_output_file, read_text, temp_sibling, write_atomic, write_atomic_with};
 pub use error::DatasetError;
 pub use outdir::OutputDir;
 pub use png::{
-    encode_jpeg_gray, encode_png_u16, encode_png_u8, write_png_u16, write_png_u8, PngSpeed,
+    encode_jpeg_gray, encode_png_u16, encode_png_u8, read_png_text, write_png_u16,
+    write_png_u16_with_text, write_png_u8, PngSpeed,
 };
 pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};
 pub use sequence::{

@@ -115,3 +115,48 @@ pub fn encode_jpeg_gray(
     enc.write_image(data, width as u32, height as u32, ExtendedColorType::L8)?;
     Ok(out)
 }
+
+/// Writes a 16-bit grey PNG atomically with `tEXt` chunks (keyword, text): metadata a reader
+/// finds beside the pixels (for example the scale of a map stored in 16 bits).
+pub fn write_png_u16_with_text(
+    path: &Path,
+    width: usize,
+    height: usize,
+    data: &[u16],
+    text: &[(&str, String)],
+) -> Result<(), DatasetError> {
+    check_len(path, data.len(), width * height)?;
+    let bad = |e: &dyn std::fmt::Display| {
+        DatasetError::invalid(path, format!("PNG encoding failed: {e}"))
+    };
+    let mut bytes = Vec::with_capacity(data.len() + 1024);
+    {
+        let mut enc = ::png::Encoder::new(&mut bytes, width as u32, height as u32);
+        enc.set_color(::png::ColorType::Grayscale);
+        enc.set_depth(::png::BitDepth::Sixteen);
+        for (k, v) in text {
+            enc.add_text_chunk((*k).to_string(), v.clone())
+                .map_err(|e| bad(&e))?;
+        }
+        let mut w = enc.write_header().map_err(|e| bad(&e))?;
+        let be: Vec<u8> = data.iter().flat_map(|v| v.to_be_bytes()).collect();
+        w.write_image_data(&be).map_err(|e| bad(&e))?;
+        w.finish().map_err(|e| bad(&e))?;
+    }
+    write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
+}
+
+/// The `tEXt` chunks of a PNG file (keyword, text).
+pub fn read_png_text(path: &Path) -> Result<Vec<(String, String)>, DatasetError> {
+    let file = std::fs::File::open(path).map_err(|e| DatasetError::io(path, e))?;
+    let decoder = ::png::Decoder::new(std::io::BufReader::new(file));
+    let reader = decoder
+        .read_info()
+        .map_err(|e| DatasetError::invalid(path, format!("not a readable PNG: {e}")))?;
+    Ok(reader
+        .info()
+        .uncompressed_latin1_text
+        .iter()
+        .map(|t| (t.keyword.clone(), t.text.clone()))
+        .collect())
+}

@@ -30,17 +30,20 @@
 mod correct;
 mod error;
 pub mod marker;
+mod noise;
 mod response;
 mod response_calib;
+mod smoothing;
 mod vignette;
 mod vignette_calib;
 
 pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
+pub use noise::NoiseModel;
 pub use response::InverseResponse;
 pub use response_calib::{calibrate_response, ResponseCalibration, ResponseOptions};
+pub use smoothing::SmoothingChoice;
 pub use vignette::{vignette_errors, Vignette};
 pub use vignette_calib::{
-    calibrate_vignette, smooth_masked, PlaneFrame, PlaneFrames, PlanePose, VignetteCalibration,
-    VignetteOptions,
+    calibrate_vignette, PlaneFrame, PlaneFrames, PlanePose, VignetteCalibration, VignetteOptions,
 };

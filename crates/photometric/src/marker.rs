@@ -599,3 +599,89 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     }
     Some(x)
 }
+
+/// What the marker of one frame gave.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PoseFromMarker {
+    /// The plane pose.
+    Found(PlanePose),
+    /// No marker with the id.
+    NoMarker,
+    /// The marker was found but its corners give no pose.
+    NoPose,
+    /// More than one marker with the id.
+    Several(usize),
+}
+
+/// The plane pose of a raw frame from its marker: the frame is rectified to the pinhole `k`
+/// by `map`, the marker `id` detected, and the pose computed (`camera_from_plane` of the
+/// rectified camera, which shares the raw camera's frame).
+pub fn pose_from_marker(
+    map: &camera_model::RectifyMap,
+    k: &Intrinsics,
+    frame: &Image<u8>,
+    id: u16,
+) -> Result<PoseFromMarker, crate::PhotometricError> {
+    let rect = map.remap_u8(frame)?;
+    let found: Vec<MarkerDetection> = detect_markers(&rect)
+        .into_iter()
+        .filter(|d| d.id == id)
+        .collect();
+    Ok(match found.len() {
+        0 => PoseFromMarker::NoMarker,
+        1 => match marker_pose(k, &found[0].corners) {
+            Some(p) => PoseFromMarker::Found(p),
+            None => PoseFromMarker::NoPose,
+        },
+        n => PoseFromMarker::Several(n),
+    })
+}
+
+/// Parses a plane-poses file: one line per frame, `id r11 r12 r13 r21 r22 r23 r31 r32 r33 tx
+/// ty tz` (`camera_from_plane` of the raw camera, the marker the unit square at the origin);
+/// `#` comments and blank lines are skipped. Errors name the line.
+pub fn parse_plane_poses(text: &str) -> Result<Vec<(String, PlanePose)>, crate::PhotometricError> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut out: Vec<(String, PlanePose)> = Vec::new();
+    let mut seen = std::collections::HashMap::new();
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let f: Vec<&str> = t.split_whitespace().collect();
+        let bad = || {
+            crate::PhotometricError::Parse {
+            line: i + 1,
+            expected: "`id r11 r12 r13 r21 r22 r23 r31 r32 r33 tx ty tz` (13 fields, finite numbers after the id)",
+            found: t.chars().take(100).collect(),
+        }
+        };
+        if f.len() != 13 {
+            return Err(bad());
+        }
+        let mut v = [0.0f64; 12];
+        for (slot, tok) in v.iter_mut().zip(&f[1..]) {
+            *slot = tok
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(bad)?;
+        }
+        if let Some(first) = seen.insert(f[0].to_string(), i + 1) {
+            return Err(crate::PhotometricError::Parse {
+                line: i + 1,
+                expected: "each frame id once",
+                found: format!("`{}` again (first on line {first})", f[0]),
+            });
+        }
+        out.push((
+            f[0].to_string(),
+            PlanePose {
+                r: [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]],
+                t: [v[9], v[10], v[11]],
+            },
+        ));
+    }
+    Ok(out)
+}

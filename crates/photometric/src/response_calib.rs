@@ -43,6 +43,7 @@ use camera_model::Image;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
+use crate::noise::{fit_noise, interp, slope_at, NoiseModel};
 use crate::{InverseResponse, PhotometricError};
 
 /// Number of grey values of an 8-bit frame.
@@ -82,30 +83,6 @@ impl Default for ResponseOptions {
             censor_sigmas: 3.0,
             min_count: 20,
         }
-    }
-}
-
-/// The grey-level noise of one observation as a function of its expected grey value `p`:
-/// variance `(read + shot U(p)) / U'(p)^2 + adc` (grey levels squared), with `U'` the
-/// slope of the inverse response per grey level.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NoiseModel {
-    /// Signal-independent noise before the response (read noise), in U-units squared.
-    pub read: f64,
-    /// Photon shot noise: variance per U-unit of signal.
-    pub shot: f64,
-    /// Noise after the response (ADC, quantisation), in grey levels squared.
-    pub adc: f64,
-}
-
-impl NoiseModel {
-    /// The variance at expected grey value `p` for the inverse response `u`.
-    pub fn variance(&self, u: &[f64; LEVELS], p: f64) -> f64 {
-        let p = p.clamp(0.0, 255.0);
-        let k = (p.round() as usize).min(255);
-        let slope = slope_at(u, k);
-        let up = interp(u, p).max(0.0);
-        ((self.read + self.shot * up) / (slope * slope) + self.adc).max(1e-3)
     }
 }
 
@@ -184,24 +161,6 @@ fn masked(bits: &[u64], p: usize) -> bool {
     bits[p / 64] >> (p % 64) & 1 == 1
 }
 
-/// `U'` at grey value `k`: the secant over `k - 3 ..= k + 3` (shortened at the ends), at
-/// least a twentieth of the mean slope (noise in `U` must not make the noise model explode).
-fn slope_at(u: &[f64; LEVELS], k: usize) -> f64 {
-    let a = k.saturating_sub(3);
-    let b = (k + 3).min(255);
-    let s = (u[b] - u[a]) / (b - a) as f64;
-    let mean = (u[255] - u[0]).abs() / 255.0;
-    s.max(0.05 * mean).max(1e-12)
-}
-
-/// `U` at a fractional grey value (linear interpolation).
-fn interp(u: &[f64; LEVELS], p: f64) -> f64 {
-    let p = p.clamp(0.0, 255.0);
-    let j = (p as usize).min(254);
-    let f = p - j as f64;
-    u[j] + f * (u[j + 1] - u[j])
-}
-
 /// The forward response `G = U^-1` of a strictly increasing table, piecewise linear, with a
 /// lookup table over `sqrt(energy)` that makes each evaluation a few operations.
 struct Forward {
@@ -253,7 +212,6 @@ impl Forward {
         Some((j, f))
     }
 }
-
 
 /// Per-pixel state.
 #[derive(Clone, Copy, Debug, Default)]
@@ -669,7 +627,11 @@ fn u_system(
         b[GAUGE] = 0.0;
     }
     // a tiny ridge keeps the system definite where neither data nor prior reach
-    let ridge = 1e-12 * (0..LEVELS).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-300);
+    let ridge = 1e-12
+        * (0..LEVELS)
+            .map(|k| a[(k, k)])
+            .fold(0.0, f64::max)
+            .max(1e-300);
     for k in 0..LEVELS {
         a[(k, k)] += ridge;
     }
@@ -678,8 +640,7 @@ fn u_system(
 
 fn singular() -> PhotometricError {
     PhotometricError::Calibration(
-        "the response step has no unique solution (too little data); record more exposures"
-            .into(),
+        "the response step has no unique solution (too little data); record more exposures".into(),
     )
 }
 
@@ -903,65 +864,6 @@ fn make_monotone(u: &mut [f64; LEVELS], weight: &[f64]) {
     }
 }
 
-/// Fits the noise model to residual variances per predicted grey value (non-negative least
-/// squares on the relative error of the bins with enough data).
-fn fit_noise(u: &[f64; LEVELS], rss: &[f64], cnt: &[f64]) -> Option<NoiseModel> {
-    let rows: Vec<(f64, [f64; 3], f64)> = (0..LEVELS)
-        .filter(|&k| cnt[k] >= 50.0)
-        .map(|k| {
-            let v = rss[k] / cnt[k];
-            let s = slope_at(u, k);
-            let feats = [1.0 / (s * s), u[k].max(0.0) / (s * s), 1.0];
-            // relative error: weight by count / v^2
-            (v, feats, cnt[k] / (v * v).max(1e-6))
-        })
-        .collect();
-    if rows.len() < 8 {
-        return None;
-    }
-    let mut best: Option<(f64, [f64; 3])> = None;
-    // all non-empty active sets of the three non-negative terms
-    for mask in 1u8..8 {
-        let idx: Vec<usize> = (0..3).filter(|i| mask >> i & 1 == 1).collect();
-        let m = idx.len();
-        let mut ata = DMatrix::<f64>::zeros(m, m);
-        let mut atb = DVector::<f64>::zeros(m);
-        for (v, f, w) in &rows {
-            for (a, &ia) in idx.iter().enumerate() {
-                atb[a] += w * f[ia] * v;
-                for (b, &ib) in idx.iter().enumerate() {
-                    ata[(a, b)] += w * f[ia] * f[ib];
-                }
-            }
-        }
-        let Some(sol) = ata.cholesky().map(|c| c.solve(&atb)) else {
-            continue;
-        };
-        if sol.iter().any(|&x| !(x >= 0.0) || !x.is_finite()) {
-            continue;
-        }
-        let mut coef = [0.0; 3];
-        for (a, &ia) in idx.iter().enumerate() {
-            coef[ia] = sol[a];
-        }
-        let cost: f64 = rows
-            .iter()
-            .map(|(v, f, w)| {
-                let pred = coef[0] * f[0] + coef[1] * f[1] + coef[2] * f[2];
-                w * (v - pred).powi(2)
-            })
-            .sum();
-        if best.as_ref().is_none_or(|(c, _)| cost < *c) {
-            best = Some((cost, coef));
-        }
-    }
-    best.map(|(_, c)| NoiseModel {
-        read: c[0],
-        shot: c[1],
-        adc: c[2],
-    })
-}
-
 /// The selection range `[lo, hi]` of predicted grey values: at least `z` standard deviations
 /// from the clipping points -0.5 and 254.5.
 fn censor_range(var: &[f64; LEVELS], z: f64) -> (f64, f64) {
@@ -1110,7 +1012,6 @@ const INITIAL_ITERATIONS: usize = 8;
 /// the data; then they are frozen, so that the iteration converges on a fixed problem.
 const ADAPT_ITERATIONS: usize = 6;
 
-
 /// A converged state to restart from, with its frozen noise model and a new selection.
 #[derive(Clone)]
 struct Warm {
@@ -1133,13 +1034,7 @@ impl Solver<'_> {
         let npx = self.frames[0].data().len();
         let warm_start = warm.is_some();
         let (mut u, mut state, mut noise, z, max_iter) = match warm {
-            Some(w) => (
-                w.u,
-                w.state,
-                Some(w.noise),
-                w.censor_sigmas,
-                w.iterations,
-            ),
+            Some(w) => (w.u, w.state, Some(w.noise), w.censor_sigmas, w.iterations),
             None => {
                 let mut u = initial_response(self.frames, self.exposures, INITIAL_ITERATIONS);
                 let g = 128.0 / u[GAUGE].max(1e-12);
@@ -1172,8 +1067,10 @@ impl Solver<'_> {
             None => (8.0, 245.0),
         };
         let (mut e_lo, mut e_hi) = (interp(&u, lo), interp(&u, hi));
-        let (mut e_lo_taper, mut e_hi_taper) =
-            (interp(&u, (lo + 2.0).min(hi)), interp(&u, (hi - 2.0).max(lo)));
+        let (mut e_lo_taper, mut e_hi_taper) = (
+            interp(&u, (lo + 2.0).min(hi)),
+            interp(&u, (hi - 2.0).max(lo)),
+        );
         let mut prior = prior_weight(&u, self.log_gap, lo, hi, self.options.smoothness);
         let (t_min, t_max) = self
             .exposures
@@ -1238,7 +1135,9 @@ impl Solver<'_> {
             }
             last_objective = objective;
             let mut nu = solve_u_step(&u, &sums, &penalty, lambda, damping)?;
-            let info: Vec<f64> = (0..LEVELS).map(|k| sums.diag[k] + penalty[(k, k)]).collect();
+            let info: Vec<f64> = (0..LEVELS)
+                .map(|k| sums.diag[k] + penalty[(k, k)])
+                .collect();
             for v in nu.iter_mut() {
                 // U(0) is the black level: nothing below zero
                 *v = v.max(0.0);
@@ -1571,7 +1470,8 @@ pub fn calibrate_response(
         }
     }
     let response = InverseResponse::new(normalized(&extrapolate(&sol.u, first, last).0))?;
-    let rmse = (sol.sums.rss.iter().sum::<f64>() / sol.sums.cnt.iter().sum::<f64>().max(1.0)).sqrt();
+    let rmse =
+        (sol.sums.rss.iter().sum::<f64>() / sol.sums.cnt.iter().sum::<f64>().max(1.0)).sqrt();
     Ok(ResponseCalibration {
         response,
         std_error,

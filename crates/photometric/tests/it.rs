@@ -5,3 +5,4 @@ mod correct;
 mod files;
 mod marker;
 mod response;
+mod vignette;

@@ -4,8 +4,8 @@
 //! noise. The true poses are available in `monovo calib vignette --poses` format.
 
 use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
-use crate::sensor::Sensor;
 use crate::scene::texture;
+use crate::sensor::Sensor;
 use crate::trajectory::{mat_vec, Mat3, Vec3};
 use crate::Rng;
 

@@ -1,6 +1,6 @@
 //! `monovo calib`: photometric calibration of your own camera.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use camera_model::Image;
@@ -20,41 +20,100 @@ pub struct Args {
 /// What to calibrate.
 #[derive(clap::Subcommand, Debug)]
 pub enum What {
-    /// The inverse response U (pcalib.txt) from a static scene at varying, known exposures.
+    /// The inverse response U (pcalib.txt) from a static scene at varying, known exposures,
+    /// with the standard error of every U(k).
     #[command(after_help = "\
-Record a static scene with a wide range of grey values while the exposure changes slowly
-(the paper: 1000 images, 120 exposures from 0.05 to 20 ms in steps of 1.05). SEQ holds the
-images and times.txt with the exposure of every frame.
+Record a static scene with a wide range of grey values while the exposure changes (the
+paper: 1000 images, 120 exposures from 0.05 to 20 ms in steps of 1.05). SEQ holds the images
+and times.txt with the exposure of every frame.
 
   monovo calib response sweep -o pcalib.txt --plot response.png
 
-The method is the paper's alternating least squares (U(k) = mean of t B' over pixels of
-value k; B' = sum t U(I) / sum t^2), iterated until the energy changes by less than
---tolerance. Saturated pixels and a small border around them are dropped; observations above
-grey value 245 do not enter B' (saturation censors the noise there and would bias it);
-values never observed are interpolated or extrapolated; the result is scaled to U(255)=255
-and is always finite and strictly increasing. --smoothness adds a second-difference prior
-for small data sets (0 = the paper's unregularised method).")]
+Writes pcalib.txt (U scaled to U(255) = 255, strictly increasing, as DSO reads it) and
+pcalib_std.txt beside it (one line of 256 standard errors on the same scale).
+
+The model is the paper's, I = G(t B') + noise with G = U^-1, fitted where the noise is: in
+grey values, each observation weighted by its noise (shot, read and ADC noise, fitted to the
+residuals), with Newton steps in which each pixel's B' is eliminated. Observations enter by
+the model's prediction, never by their observed value: only where the predicted grey value is
+--censor-sigmas noise standard deviations inside 0..255, so saturation does not bias the
+bright values. Saturated pixels and a --saturation-border around them are dropped. Exposures
+in constant ratios leave U undetermined up to ripples with the period of the ratio; a
+third-difference prior removes them, smoothing over --smoothness grey values or more when the
+ratio is large, and continues U to the few values the data leave out (the top is continued
+as a quadratic in log U). The standard errors combine the sampling error with the
+sensitivities to the prior and to the selection; on synthetic sweeps about 93% of the true
+errors lie within two of them.")]
     Response(ResponseArgs),
     /// A dense vignette map (vignette.png) from a video of a bright planar wall with one
-    /// printed ArUco marker (original dictionary) that gives the plane's pose.
+    /// printed ArUco marker (original dictionary) that gives the plane's pose, with the
+    /// paper's unregularised map, the standard error and the coverage beside it.
     #[command(after_help = "\
 Film a bright, matte, planar surface (a white wall) with one printed marker of the original
 ArUco dictionary (id 213 by default; the printed marker, black border included, is the unit
-of length), from many viewpoints so that every image region sees the wall. SEQ holds the
-images, times.txt with exposures, camera.txt (the raw camera; line 3 is the pinhole used to
-find the marker) and pcalib.txt (or give --pcalib).
+of length), from many viewpoints so that every image region, the corners included, sees the
+wall. SEQ holds the images, times.txt with exposures, camera.txt (the raw camera; line 3 is the
+pinhole used to find the marker) and pcalib.txt (or give --pcalib).
 
   monovo calib vignette wall -o vignette.png --plot vignette_plot.png
 
-The paper's alternating minimisation of E(C, V) with the plane irradiance C on a 1000x1000 grid
-over 5x5 marker widths, bilinear sampling and splatting, outlier rejection in the later
-iterations, V scaled to max 1. Frames are streamed from the sequence: memory does not grow
-with their number. Pixels with fewer than 8 observations are 0 (invalid) in vignette.png; a
-smoothed map is written beside it. --poses FILE replaces the marker detection: one line
-per frame `id r11 r12 r13 r21 r22 r23 r31 r32 r33 tx ty tz` (camera_from_plane of the raw
-camera, marker corner 0 at (-0.5, 0.5), corner 1 at (0.5, 0.5)).")]
+Writes, all 16-bit grey PNG at the raw resolution:
+  vignette.png           the map to use (V = value / 65535, max 1): the paper's map smoothed
+                         with a strength chosen by cross-validation between the maps of the
+                         odd and of the even frames (printed; --smoothing sets it)
+  vignette_raw.png       the paper's unregularised per-pixel map on the same scale (pixels
+                         without enough observations, and defective ones, take the value of
+                         vignette.png; the coverage image tells which)
+  vignette_std.png       the standard error of vignette.png per pixel; the value that 65535
+                         stands for is in the PNG's text chunk `monovo:std_scale` and in --json
+  vignette_coverage.png  observations per pixel (0: none)
+
+The model is the paper's, U(I) = t V(x) C(plane point) + noise, with C on a 1000x1000 grid over
+5x5 marker widths and bilinear sampling, weighted by each observation's noise and by the
+error a misregistration of --registration-px makes where C has edges, solved to convergence
+(alternating V and C, accelerated) with outliers dropped once it settles. Frames are streamed:
+memory does not grow with their number. Refused when the data cannot determine V: no marker,
+an image corner never covered, or observations that fall into unconnected parts.
+
+--poses FILE replaces the marker detection: one line per frame `id r11 r12 r13 r21 r22 r23
+r31 r32 r33 tx ty tz` (camera_from_plane of the raw camera, marker corner 0 at (-0.5, 0.5),
+corner 1 at (0.5, 0.5)).")]
     Vignette(VignetteArgs),
+}
+
+/// Arguments of `monovo calib response`.
+#[derive(clap::Args, Debug)]
+pub struct ResponseArgs {
+    /// The sweep sequence folder (images + times.txt with exposures).
+    pub sequence: PathBuf,
+    /// The pcalib.txt to write; the standard errors go beside it as NAME_std.txt.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
+    /// Iteration limit.
+    #[arg(long, default_value_t = ResponseOptions::default().max_iterations)]
+    pub max_iterations: usize,
+    /// Stop when U changes by less than this many grey values between iterations.
+    #[arg(long, default_value_t = ResponseOptions::default().tolerance)]
+    pub tolerance: f64,
+    /// Smallest smoothing scale of the prior, in grey values.
+    #[arg(long, default_value_t = ResponseOptions::default().smoothness)]
+    pub smoothness: f64,
+    /// Observations enter only where the model predicts a grey value this many noise
+    /// standard deviations inside 0..255.
+    #[arg(long, default_value_t = ResponseOptions::default().censor_sigmas)]
+    pub censor_sigmas: f64,
+    /// Radius (pixels) dropped around saturated pixels.
+    #[arg(long, default_value_t = ResponseOptions::default().saturation_border)]
+    pub saturation_border: usize,
+    /// Plot U with its 2-sigma band, the standard errors and the observations (.png or .svg).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `monovo calib vignette`.
@@ -62,9 +121,13 @@ camera, marker corner 0 at (-0.5, 0.5), corner 1 at (0.5, 0.5)).")]
 pub struct VignetteArgs {
     /// The sequence folder (images, times.txt with exposures, camera.txt).
     pub sequence: PathBuf,
-    /// The vignette.png to write (16-bit); the smoothed map goes beside it as *_smooth.png.
+    /// The vignette.png to write (16-bit); NAME_raw.png, NAME_std.png and NAME_coverage.png
+    /// go beside it.
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
+    /// Replace existing outputs.
+    #[arg(long)]
+    pub force: bool,
     /// The inverse response (default: SEQ/pcalib.txt).
     #[arg(long, value_name = "FILE")]
     pub pcalib: Option<PathBuf>,
@@ -77,7 +140,16 @@ pub struct VignetteArgs {
     /// Iteration limit.
     #[arg(long, default_value_t = photometric::VignetteOptions::default().max_iterations)]
     pub max_iterations: usize,
-    /// Plot the map and its cross-sections (.png or .svg).
+    /// Smoothing of vignette.png (Gaussian standard deviation in pixels) instead of the one
+    /// chosen by cross-validation; 0 writes the raw map.
+    #[arg(long, value_name = "PX")]
+    pub smoothing: Option<f64>,
+    /// Registration uncertainty of the plane in pixels (weights observations at edges of
+    /// the plane's texture).
+    #[arg(long, value_name = "PX", default_value_t = photometric::VignetteOptions::default().registration_px)]
+    pub registration_px: f64,
+    /// Plot the maps, their cross-sections with 2-sigma bands, the standard error and the
+    /// coverage (.png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
     /// Print one JSON object.
@@ -85,29 +157,23 @@ pub struct VignetteArgs {
     pub json: bool,
 }
 
-/// Arguments of `monovo calib response`.
-#[derive(clap::Args, Debug)]
-pub struct ResponseArgs {
-    /// The sweep sequence folder (images + times.txt with exposures).
-    pub sequence: PathBuf,
-    /// The pcalib.txt to write.
-    #[arg(short, long, value_name = "FILE")]
-    pub output: PathBuf,
-    /// Iteration limit.
-    #[arg(long, default_value_t = ResponseOptions::default().max_iterations)]
-    pub max_iterations: usize,
-    /// Relative energy change at which the iteration stops.
-    #[arg(long, default_value_t = ResponseOptions::default().tolerance)]
-    pub tolerance: f64,
-    /// Weight of the smoothness prior (relative to the mean observations per grey value).
-    #[arg(long, default_value_t = ResponseOptions::default().smoothness)]
-    pub smoothness: f64,
-    /// Plot U and the histogram of observed values (.png or .svg).
-    #[arg(long, value_name = "FILE")]
-    pub plot: Option<PathBuf>,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
+/// `stem_suffix.ext` beside `path` (`vignette.png` -> `vignette_raw.png`).
+pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or("out".into(), |s| s.to_string_lossy().into_owned());
+    let ext = path
+        .extension()
+        .map_or(String::new(), |e| format!(".{}", e.to_string_lossy()));
+    path.with_file_name(format!("{stem}{suffix}{ext}"))
+}
+
+/// Checks every output path before any work.
+fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
+    for p in paths {
+        dataset_io::check_output_file(p, force)?;
+    }
+    Ok(())
 }
 
 /// Reads every frame of a sequence with its exposure; errors when exposures are missing.
@@ -137,7 +203,44 @@ pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)>
     Ok((frames, exposures))
 }
 
+/// What the sweep offers before calibrating: exposures and grey values.
+fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
+    let mut sorted: Vec<f64> = exposures.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
+    let step = sorted
+        .windows(2)
+        .map(|p| p[1] / p[0])
+        .fold(1.0f64, f64::max);
+    let mut hist = [0u64; 256];
+    for f in frames {
+        for &v in f.data() {
+            hist[v as usize] += 1;
+        }
+    }
+    let total: u64 = hist.iter().sum();
+    let lo = (0..256).find(|&k| hist[k] > 0).unwrap_or(0);
+    let hi = (0..255).rev().find(|&k| hist[k] > 0).unwrap_or(0);
+    let rare = (lo..=hi).filter(|&k| hist[k] < 100).count();
+    format!(
+        "{} frames, {} exposures from {:.4} to {:.4} ms (largest step x{:.3}); grey values {lo}..{hi} observed ({} of them fewer than 100 times), {:.2}% of the observations saturated",
+        frames.len(),
+        sorted.len(),
+        sorted.first().copied().unwrap_or(0.0),
+        sorted.last().copied().unwrap_or(0.0),
+        step,
+        rare,
+        100.0 * hist[255] as f64 / total.max(1) as f64
+    )
+}
+
 fn run_response(a: &ResponseArgs) -> Result<()> {
+    let std_path = sibling(&a.output, "_std");
+    let mut outs: Vec<&Path> = vec![&a.output, &std_path];
+    if let Some(p) = &a.plot {
+        outs.push(p);
+    }
+    check_outputs(&outs, a.force)?;
     let seq = Sequence::open(&a.sequence)?;
     if seq.len() < 2 {
         bail!(
@@ -147,78 +250,118 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         );
     }
     let (mut frames, exposures) = load_exposed_frames(&seq)?;
+    let report = sweep_report(&frames, &exposures);
+    if !a.json {
+        println!("{report}");
+    }
     let opts = ResponseOptions {
         max_iterations: a.max_iterations.max(1),
         tolerance: a.tolerance,
         smoothness: a.smoothness.max(0.0),
+        censor_sigmas: a.censor_sigmas.max(0.5),
+        saturation_border: a.saturation_border,
         ..ResponseOptions::default()
     };
-    let pb = progress::bar(opts.max_iterations as u64, "iterating");
-    let cal = calibrate_response(&mut frames, &exposures, &opts, &|i, e| {
-        pb.set_position(i as u64);
-        pb.set_message(format!("E={e:.4e}"));
+    let pb = progress::spinner("calibrating");
+    let cal = calibrate_response(&mut frames, &exposures, &opts, &|i, change| {
+        pb.set_message(format!(
+            "iteration {i}, U changed by {change:.4} grey values"
+        ));
+        pb.tick();
     })
     .with_context(|| format!("{}", a.sequence.display()))?;
     pb.finish_and_clear();
+    for w in &cal.warnings {
+        eprintln!("monovo: warning: {w}");
+    }
     dataset_io::write_atomic(&a.output, cal.response.to_text().as_bytes())?;
+    let std_text = cal
+        .std_error
+        .iter()
+        .map(|v| format!("{v}"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    dataset_io::write_atomic(&std_path, format!("{std_text}\n").as_bytes())?;
     if let Some(p) = &a.plot {
         response_figure(&cal, None, p)?;
     }
+    let max_std = cal.std_error[..255].iter().copied().fold(0.0, f64::max);
     if a.json {
         println!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
+                "std_output": std_path.display().to_string(),
+                "plot": a.plot.as_ref().map(|p| p.display().to_string()),
+                "frames": frames.len(),
                 "iterations": cal.iterations,
                 "converged": cal.converged,
+                "change": cal.change,
                 "rmse": cal.rmse,
                 "observed_min": cal.observed_range.0,
                 "observed_max": cal.observed_range.1,
                 "filled": cal.filled,
-                "frames": frames.len(),
+                "censor_range": [cal.censor_range.0, cal.censor_range.1],
+                "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
+                "prior_weight": cal.prior_weight,
+                "pixels_used": cal.pixels_used,
+                "u": cal.response.values().to_vec(),
+                "std_error": cal.std_error,
+                "systematic_error": cal.systematic_error,
+                "histogram": cal.histogram,
+                "warnings": cal.warnings,
             })
         );
     } else {
         println!(
-            "{} after {} iterations ({}), residual RMSE {:.3} grey values",
+            "{} after {} iterations (last change {:.4} grey values); residual RMS {:.3} grey values",
             if cal.converged {
                 "converged"
             } else {
                 "stopped"
             },
             cal.iterations,
-            if cal.converged {
-                "tolerance reached"
-            } else {
-                "iteration limit"
-            },
+            cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rmse
         );
         println!(
-            "observed grey values {}..{}; {} value(s) filled by interpolation/extrapolation",
+            "noise: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2; observations used where the prediction is {:.0}..{:.0}",
+            cal.noise.read, cal.noise.shot, cal.noise.adc, cal.censor_range.0, cal.censor_range.1
+        );
+        println!(
+            "U determined by the data for grey values {}..{}; {} value(s) continued by the prior; largest standard error {:.3} grey values",
             cal.observed_range.0,
             cal.observed_range.1,
-            cal.filled.len() + 1
+            cal.filled.len(),
+            max_std
         );
-        println!("wrote {}", a.output.display());
+        println!("wrote {} and {}", a.output.display(), std_path.display());
     }
     Ok(())
 }
 
-/// Plots U (and the truth, when known) beside the histogram of observed grey values.
+/// Plots U with its 2-sigma band (and the truth, when known), the standard errors, and the
+/// observations per grey value.
 pub fn response_figure(
     cal: &photometric::ResponseCalibration,
     truth: Option<&[f64; 256]>,
-    path: &std::path::Path,
+    path: &Path,
 ) -> Result<()> {
     let u = cal.response.values();
+    let sd = &cal.std_error;
     let mut c1 = Chart::new(
         "inverse response U",
         "grey value I",
-        "U(I) (scaled to U(255)=255)",
+        "U(I) (scaled to U(255) = 255)",
     );
     c1.legend = Some(Corner::TopLeft);
     c1.x_range = Some([0.0, 255.0]);
+    c1.series.push(Series::band(
+        "2-sigma band",
+        (0..256).map(|k| [k as f64, u[k] - 2.0 * sd[k]]).collect(),
+        (0..256).map(|k| [k as f64, u[k] + 2.0 * sd[k]]).collect(),
+        PALETTE[0],
+    ));
     c1.series.push(Series::line(
         "U estimated",
         (0..256).map(|k| [k as f64, u[k]]).collect(),
@@ -237,68 +380,67 @@ pub fn response_figure(
     c1.series
         .push(Series::line("linear", vec![[0.0, 0.0], [255.0, 255.0]], PALETTE[7]).dashed());
     let mut c2 = Chart::new(
-        "observed grey values",
+        "uncertainty of U",
         "grey value I",
-        "observations (log10)",
+        "grey values (U(255) = 255 scale)",
     );
-    c2.legend = None;
+    c2.legend = Some(Corner::TopLeft);
     c2.x_range = Some([0.0, 255.0]);
-    let hist: Vec<[f64; 2]> = cal
-        .histogram
-        .iter()
-        .take(255)
-        .enumerate()
-        .flat_map(|(k, &c)| {
-            let v = (c as f64).max(1.0).log10();
-            [[k as f64, v], [k as f64 + 1.0, v]]
-        })
-        .collect();
-    c2.series.push(Series::line("", hist, PALETTE[1]));
+    c2.series.push(Series::line(
+        "standard error",
+        (0..255).map(|k| [k as f64, sd[k]]).collect(),
+        PALETTE[0],
+    ));
+    c2.series.push(
+        Series::line(
+            "its systematic part",
+            (0..255)
+                .map(|k| [k as f64, cal.systematic_error[k]])
+                .collect(),
+            PALETTE[3],
+        )
+        .dashed(),
+    );
+    if let Some(t) = truth {
+        c2.series.push(Series::line(
+            "|U - U true|",
+            (0..255).map(|k| [k as f64, (u[k] - t[k]).abs()]).collect(),
+            PALETTE[2],
+        ));
+    }
+    let mut c3 = Chart::new("observations", "grey value I", "observations (log10)");
+    c3.legend = Some(Corner::TopRight);
+    c3.x_range = Some([0.0, 255.0]);
+    let steps = |h: &[u64]| -> Vec<[f64; 2]> {
+        h.iter()
+            .take(255)
+            .enumerate()
+            .flat_map(|(k, &c)| {
+                let v = (c as f64).max(1.0).log10();
+                [[k as f64, v], [k as f64 + 1.0, v]]
+            })
+            .collect()
+    };
+    c3.series.push(Series::line(
+        "observed values",
+        steps(&cal.histogram),
+        PALETTE[1],
+    ));
+    c3.series.push(Series::line(
+        "used (by prediction)",
+        steps(&cal.used),
+        PALETTE[4],
+    ));
     let fig = Figure {
-        width: 1200,
-        height: 500,
+        width: 1650,
+        height: 520,
         panels: vec![
-            (Panel::Chart(c1), [0.0, 0.0, 0.5, 1.0]),
-            (Panel::Chart(c2), [0.5, 0.0, 0.5, 1.0]),
+            (Panel::Chart(c1), [0.0, 0.0, 0.34, 1.0]),
+            (Panel::Chart(c2), [0.34, 0.0, 0.33, 1.0]),
+            (Panel::Chart(c3), [0.67, 0.0, 0.33, 1.0]),
         ],
     };
     plot::save(&fig, path)
-}
-
-/// Parses a poses file: `id r11 .. r33 tx ty tz` per line.
-fn parse_poses(
-    path: &std::path::Path,
-) -> Result<std::collections::HashMap<String, photometric::PlanePose>> {
-    let text = dataset_io::read_text(path)?;
-    let mut out = std::collections::HashMap::new();
-    for (i, line) in text.lines().enumerate() {
-        let t = line.trim();
-        if t.is_empty() || t.starts_with('#') {
-            continue;
-        }
-        let f: Vec<&str> = t.split_whitespace().collect();
-        let nums: Option<Vec<f64>> = f.get(1..).map(|r| {
-            r.iter()
-                .filter_map(|x| x.parse::<f64>().ok().filter(|v| v.is_finite()))
-                .collect()
-        });
-        match nums {
-            Some(v) if f.len() == 13 && v.len() == 12 => {
-                let pose = photometric::PlanePose {
-                    r: [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]],
-                    t: [v[9], v[10], v[11]],
-                };
-                out.insert(f[0].to_string(), pose);
-            }
-            _ => bail!(
-                "{}: line {}: expected `id r11 r12 r13 r21 r22 r23 r31 r32 r33 tx ty tz` (13 fields, finite numbers), found `{}`",
-                path.display(),
-                i + 1,
-                t.chars().take(100).collect::<String>()
-            ),
-        }
-    }
-    Ok(out)
 }
 
 /// Frames of a sequence with poses: decoded once and kept when they fit in
@@ -333,69 +475,189 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
     }
 }
 
-/// The vignette map and its cross-sections through the image centre.
+/// The maps, their cross-sections through the image centre with 2-sigma bands (and the
+/// truth, when known), the standard error and the coverage.
 pub fn vignette_figure(
-    v: &Image<f32>,
+    cal: &photometric::VignetteCalibration,
     truth: Option<&[f32]>,
-    path: &std::path::Path,
+    path: &Path,
 ) -> Result<()> {
+    let v = &cal.vignette;
     let (w, h) = v.size();
-    let heat = crate::plot::Heatmap {
-        title: "vignette V".into(),
-        width: w,
-        height: h,
-        values: v.data().to_vec(),
-        range: [0.0, 1.0],
-        label: "V (0 = invalid)".into(),
+    let heat = |title: &str, values: Vec<f32>, range: [f32; 2], label: &str| {
+        Panel::Heatmap(crate::plot::Heatmap {
+            title: title.into(),
+            width: w,
+            height: h,
+            values,
+            range,
+            label: label.into(),
+        })
     };
-    let mut hc = Chart::new("horizontal cross-section (middle row)", "x (pixels)", "V");
-    let mut vc = Chart::new("vertical cross-section (middle column)", "y (pixels)", "V");
-    hc.legend = truth.map(|_| Corner::BottomRight);
-    vc.legend = truth.map(|_| Corner::BottomRight);
-    let row: Vec<[f64; 2]> = (0..w)
-        .map(|x| [x as f64, v.get(x, h / 2).map_or(f64::NAN, |q| q as f64)])
-        .collect();
-    let col: Vec<[f64; 2]> = (0..h)
-        .map(|y| [y as f64, v.get(w / 2, y).map_or(f64::NAN, |q| q as f64)])
-        .collect();
-    hc.series.push(Series::line("estimated", row, PALETTE[0]));
-    vc.series.push(Series::line("estimated", col, PALETTE[0]));
-    if let Some(t) = truth {
-        hc.series.push(
-            Series::line(
-                "true",
-                (0..w)
-                    .map(|x| [x as f64, t[h / 2 * w + x] as f64])
-                    .collect(),
-                PALETTE[2],
-            )
-            .dashed(),
+    let sd = cal.std_error.data();
+    let sd_max = sd.iter().copied().fold(0.0f32, f32::max).max(1e-6);
+    let counts: Vec<f32> = cal.counts.data().iter().map(|&c| c as f32).collect();
+    let c_max = counts.iter().copied().fold(0.0f32, f32::max).max(1.0);
+    let section = |title: &str, axis: &str, n: usize, at: &dyn Fn(usize) -> usize| {
+        let mut c = Chart::new(title, axis, "V");
+        c.legend = Some(Corner::BottomRight);
+        let val = |img: &Image<f32>, i: usize| img.data()[at(i)] as f64;
+        c.series.push(Series::band(
+            "recommended, 2 sigma",
+            (0..n)
+                .map(|i| [i as f64, val(v, i) - 2.0 * sd[at(i)] as f64])
+                .collect(),
+            (0..n)
+                .map(|i| [i as f64, val(v, i) + 2.0 * sd[at(i)] as f64])
+                .collect(),
+            PALETTE[0],
+        ));
+        let mut raw = Series::line(
+            "raw (the paper's)",
+            (0..n).map(|i| [i as f64, val(&cal.raw, i)]).collect(),
+            PALETTE[7],
         );
-        vc.series.push(
-            Series::line(
-                "true",
-                (0..h)
-                    .map(|y| [y as f64, t[y * w + w / 2] as f64])
-                    .collect(),
-                PALETTE[2],
-            )
-            .dashed(),
-        );
-    }
+        raw.width = 1.0;
+        c.series.push(raw);
+        c.series.push(Series::line(
+            "recommended",
+            (0..n).map(|i| [i as f64, val(v, i)]).collect(),
+            PALETTE[0],
+        ));
+        if let Some(t) = truth {
+            c.series.push(
+                Series::line(
+                    "true",
+                    (0..n).map(|i| [i as f64, t[at(i)] as f64]).collect(),
+                    PALETTE[2],
+                )
+                .dashed(),
+            );
+        }
+        Panel::Chart(c)
+    };
     let fig = Figure {
-        width: 1500,
-        height: 520,
+        width: 1650,
+        height: 1000,
         panels: vec![
-            (Panel::Heatmap(heat), [0.0, 0.0, 0.4, 1.0]),
-            (Panel::Chart(hc), [0.4, 0.0, 0.3, 1.0]),
-            (Panel::Chart(vc), [0.7, 0.0, 0.3, 1.0]),
+            (
+                heat(
+                    &format!("recommended V (smoothing {:.1} px)", cal.smoothing.sigma_px),
+                    v.data().to_vec(),
+                    [0.0, 1.0],
+                    "V",
+                ),
+                [0.0, 0.0, 0.34, 0.5],
+            ),
+            (
+                heat(
+                    "standard error of V",
+                    sd.to_vec(),
+                    [0.0, sd_max],
+                    "standard error",
+                ),
+                [0.34, 0.0, 0.33, 0.5],
+            ),
+            (
+                heat("coverage", counts, [0.0, c_max], "observations per pixel"),
+                [0.67, 0.0, 0.33, 0.5],
+            ),
+            (
+                section("middle row", "x (pixels)", w, &|x| (h / 2) * w + x),
+                [0.0, 0.5, 0.5, 0.5],
+            ),
+            (
+                section("middle column", "y (pixels)", h, &|y| y * w + w / 2),
+                [0.5, 0.5, 0.5, 0.5],
+            ),
         ],
     };
     plot::save(&fig, path)
 }
 
-fn run_vignette(a: &VignetteArgs) -> Result<()> {
+/// The plane pose of every frame: from a poses file, or from the marker.
+fn plane_poses(
+    a: &VignetteArgs,
+    seq: &Sequence,
+    cam: &camera_model::CameraFile,
+) -> Result<(
+    Vec<(usize, f64, photometric::PlanePose)>,
+    std::collections::BTreeMap<&'static str, usize>,
+)> {
     use camera_model::{output_intrinsics, OutputMode, RectifyMap};
+    use photometric::marker::PoseFromMarker;
+    let rows = &seq.times().rows;
+    let mut frames = Vec::new();
+    let mut skipped: std::collections::BTreeMap<&'static str, usize> = Default::default();
+    if let Some(pp) = &a.poses {
+        let poses: std::collections::HashMap<String, photometric::PlanePose> =
+            photometric::marker::parse_plane_poses(&dataset_io::read_text(pp)?)
+                .with_context(|| pp.display().to_string())?
+                .into_iter()
+                .collect();
+        for (k, row) in rows.iter().enumerate() {
+            match poses.get(&row.id) {
+                Some(p) => frames.push((k, row.exposure_ms.unwrap_or(0.0), *p)),
+                None => *skipped.entry("no pose in the poses file").or_default() += 1,
+            }
+        }
+        return Ok((frames, skipped));
+    }
+    let cam_path = a.sequence.join("camera.txt");
+    if cam.output == OutputMode::None && !cam.input.is_pinhole() {
+        bail!(
+            "{}: line 3 is `none`, but the {} camera must be rectified to a pinhole to find the marker; use crop, full or an explicit pinhole (or give --poses)",
+            cam_path.display(),
+            cam.input.name()
+        );
+    }
+    let k_out = output_intrinsics(&cam.input, cam.input_size, &cam.output, cam.output_size)
+        .with_context(|| cam_path.display().to_string())?;
+    let map = RectifyMap::new(&cam.input, cam.input_size, k_out, cam.output_size)?;
+    let idx = seq.indices(0..seq.len(), false);
+    let pb = progress::bar(idx.len() as u64, "markers");
+    let mut found: Vec<(usize, PoseFromMarker)> = Vec::new();
+    seq.process(
+        &idx,
+        rayon::current_num_threads() * 4,
+        |f| -> Result<(usize, PoseFromMarker)> {
+            Ok((
+                f.index,
+                photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?,
+            ))
+        },
+        |r| {
+            found.push(r);
+            pb.inc(1);
+            Ok(())
+        },
+    )?;
+    pb.finish_and_clear();
+    for (k, result) in found {
+        match result {
+            PoseFromMarker::Found(p) => frames.push((k, rows[k].exposure_ms.unwrap_or(0.0), p)),
+            PoseFromMarker::NoMarker => *skipped.entry("no marker").or_default() += 1,
+            PoseFromMarker::NoPose => *skipped.entry("no pose from the corners").or_default() += 1,
+            PoseFromMarker::Several(_) => {
+                *skipped.entry("several markers with the id").or_default() += 1
+            }
+        }
+    }
+    Ok((frames, skipped))
+}
+
+/// A vignette calibration of a sequence, as `monovo calib vignette` runs it.
+pub struct VignetteRun {
+    /// The calibration.
+    pub cal: photometric::VignetteCalibration,
+    /// Frames with a plane pose.
+    pub used: usize,
+    /// Frames without one, by reason.
+    pub skipped: std::collections::BTreeMap<&'static str, usize>,
+}
+
+/// Poses (from the marker or `--poses`) and the calibration, without writing anything.
+pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
     let seq = Sequence::open(&a.sequence)?;
     let cam_path = a.sequence.join("camera.txt");
     let Some(cam) = seq.camera() else {
@@ -418,63 +680,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
             seq.times_path().display()
         );
     }
-    let rows = &seq.times().rows;
-    let mut frames = Vec::new();
-    let mut skipped: std::collections::BTreeMap<&'static str, usize> = Default::default();
-    if let Some(pp) = &a.poses {
-        let poses = parse_poses(pp)?;
-        for (k, row) in rows.iter().enumerate() {
-            match poses.get(&row.id) {
-                Some(p) => frames.push((k, row.exposure_ms.unwrap_or(0.0), *p)),
-                None => *skipped.entry("no pose in the poses file").or_default() += 1,
-            }
-        }
-    } else {
-        if cam.output == OutputMode::None && !cam.input.is_pinhole() {
-            bail!(
-                "{}: line 3 is `none`, but the {} camera must be rectified to a pinhole to find the marker; use crop, full or an explicit pinhole (or give --poses)",
-                cam_path.display(),
-                cam.input.name()
-            );
-        }
-        let k_out = output_intrinsics(&cam.input, cam.input_size, &cam.output, cam.output_size)
-            .with_context(|| cam_path.display().to_string())?;
-        let map = RectifyMap::new(&cam.input, cam.input_size, k_out, cam.output_size)?;
-        let idx = seq.indices(0..seq.len(), false);
-        let pb = progress::bar(idx.len() as u64, "markers");
-        let mut found: Vec<(usize, Option<photometric::PlanePose>, usize)> = Vec::new();
-        seq.process(
-            &idx,
-            rayon::current_num_threads() * 4,
-            |f| -> Result<(usize, Option<photometric::PlanePose>, usize)> {
-                let rect = map.remap_u8(&f.image)?;
-                let det: Vec<_> = photometric::marker::detect_markers(&rect)
-                    .into_iter()
-                    .filter(|d| d.id == a.marker_id)
-                    .collect();
-                let pose = if det.len() == 1 {
-                    photometric::marker::marker_pose(&k_out, &det[0].corners)
-                } else {
-                    None
-                };
-                Ok((f.index, pose, det.len()))
-            },
-            |r| {
-                found.push(r);
-                pb.inc(1);
-                Ok(())
-            },
-        )?;
-        pb.finish_and_clear();
-        for (k, pose, n) in found {
-            match (pose, n) {
-                (Some(p), _) => frames.push((k, rows[k].exposure_ms.unwrap_or(0.0), p)),
-                (None, 0) => *skipped.entry("no marker").or_default() += 1,
-                (None, 1) => *skipped.entry("no pose from the corners").or_default() += 1,
-                (None, _) => *skipped.entry("several markers with the id").or_default() += 1,
-            }
-        }
-    }
+    let (frames, skipped) = plane_poses(a, &seq, cam)?;
     if frames.is_empty() {
         bail!(
             "{}: no frame has a plane pose (marker id {} was not found in any of {} frames{}); check --marker-id, the dictionary (original ArUco) and that the marker is fully visible",
@@ -484,8 +690,29 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
             if a.poses.is_some() { ", or the ids in the poses file" } else { "" }
         );
     }
+    if !a.json {
+        println!(
+            "{} of {} frames have a plane pose{}",
+            frames.len(),
+            seq.len(),
+            if skipped.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " ({})",
+                    skipped
+                        .iter()
+                        .map(|(k, v)| format!("{v}: {k}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        );
+    }
     let opts = photometric::VignetteOptions {
         max_iterations: a.max_iterations.max(1),
+        smoothing_px: a.smoothing.map(|s| s.max(0.0)),
+        registration_px: a.registration_px.max(0.0),
         ..photometric::VignetteOptions::default()
     };
     let bytes = frames.len() * cam.input_size.pixels();
@@ -510,99 +737,192 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         frames,
         decoded,
     };
-    let pb = progress::bar(opts.max_iterations as u64, "iterating");
+    let pb = progress::spinner("calibrating");
     let cal = photometric::calibrate_vignette(
         &cam.input,
         cam.input_size,
         &response,
         &source,
         &opts,
-        &|i, e| {
-            pb.set_position(i as u64);
-            pb.set_message(format!("E={e:.3e}"));
+        &|i, change| {
+            pb.set_message(format!(
+                "iteration {i}, V changed by {:.4}%",
+                100.0 * change
+            ));
+            pb.tick();
         },
     )
     .with_context(|| a.sequence.display().to_string())?;
     pb.finish_and_clear();
+    Ok(VignetteRun {
+        cal,
+        used: source.frames.len(),
+        skipped,
+    })
+}
+
+fn run_vignette(a: &VignetteArgs) -> Result<()> {
+    let raw_path = sibling(&a.output, "_raw");
+    let std_path = sibling(&a.output, "_std");
+    let cov_path = sibling(&a.output, "_coverage");
+    let mut outs: Vec<&Path> = vec![&a.output, &raw_path, &std_path, &cov_path];
+    if let Some(p) = &a.plot {
+        outs.push(p);
+    }
+    check_outputs(&outs, a.force)?;
+    let VignetteRun { cal, used, skipped } = calibrate_vignette_sequence(a)?;
+    let skipped_total: usize = skipped.values().sum();
+    for w in &cal.warnings {
+        eprintln!("monovo: warning: {w}");
+    }
     let (w, h) = cal.vignette.size();
-    let to16 = |img: &Image<f32>| -> Vec<u16> {
-        img.data()
+    let to16 = |values: &[f32], scale: f32| -> Vec<u16> {
+        values
             .iter()
-            .map(|v| {
-                if v.is_finite() {
-                    (v * 65535.0).round().clamp(0.0, 65535.0) as u16
-                } else {
-                    0
-                }
-            })
+            .map(|v| (v / scale * 65535.0).round().clamp(0.0, 65535.0) as u16)
             .collect()
     };
-    let smooth_path = {
-        let stem = a
-            .output
-            .file_stem()
-            .map_or("vignette".into(), |s| s.to_string_lossy().into_owned());
-        a.output.with_file_name(format!("{stem}_smooth.png"))
-    };
-    let raw16 = to16(&cal.vignette);
-    let smooth16 = to16(&cal.smoothed);
-    dataset_io::write_png_u16(&a.output, w, h, &raw16, dataset_io::PngSpeed::Default)?;
-    dataset_io::write_png_u16(&smooth_path, w, h, &smooth16, dataset_io::PngSpeed::Default)?;
+    let rec = cal.vignette.data();
+    // the raw map as written: its unknown pixels take the recommended value
+    let raw_filled: Vec<f32> = cal
+        .raw
+        .data()
+        .iter()
+        .zip(rec)
+        .map(|(r, s)| if r.is_finite() { *r } else { *s })
+        .collect();
+    let raw_max = raw_filled.iter().copied().fold(1.0f32, f32::max);
+    let std_scale = cal
+        .std_error
+        .data()
+        .iter()
+        .copied()
+        .fold(0.0f32, f32::max)
+        .max(1e-9) as f64;
+    dataset_io::write_png_u16_with_text(
+        &a.output,
+        w,
+        h,
+        &to16(rec, 1.0),
+        &[(
+            "monovo:map",
+            "recommended vignette, V = value / 65535".into(),
+        )],
+    )?;
+    dataset_io::write_png_u16_with_text(
+        &raw_path,
+        w,
+        h,
+        &to16(&raw_filled, raw_max),
+        &[(
+            "monovo:map",
+            format!(
+                "raw vignette (the paper's), V = value / 65535 * {raw_max} on the scale of the recommended map"
+            ),
+        )],
+    )?;
+    dataset_io::write_png_u16_with_text(
+        &std_path,
+        w,
+        h,
+        &to16(cal.std_error.data(), std_scale as f32),
+        &[
+            ("monovo:std_scale", format!("{std_scale}")),
+            (
+                "monovo:map",
+                format!("standard error of the recommended vignette = value / 65535 * {std_scale}"),
+            ),
+        ],
+    )?;
+    let cov: Vec<u16> = cal
+        .counts
+        .data()
+        .iter()
+        .map(|&c| c.min(65535) as u16)
+        .collect();
+    dataset_io::write_png_u16_with_text(
+        &cov_path,
+        w,
+        h,
+        &cov,
+        &[("monovo:map", "observations per pixel".into())],
+    )?;
     if let Some(p) = &a.plot {
-        vignette_figure(&cal.vignette, None, p)?;
+        vignette_figure(&cal, None, p)?;
     }
-    if cal.coverage < 0.98 {
-        eprintln!(
-            "monovo: warning: only {:.1}% of the pixels have at least {} observations; film the wall so that it covers every image region",
-            cal.coverage * 100.0,
-            opts.min_observations
-        );
-    }
-    let used = source.frames.len();
-    let skipped_total: usize = skipped.values().sum();
+    let sd = cal.std_error.data();
+    let sd_median = {
+        let mut v: Vec<f32> = sd.to_vec();
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
     if a.json {
         println!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
-                "smoothed": smooth_path.display().to_string(),
+                "raw": raw_path.display().to_string(),
+                "std": std_path.display().to_string(),
+                "coverage_image": cov_path.display().to_string(),
+                "plot": a.plot.as_ref().map(|p| p.display().to_string()),
+                "std_scale": std_scale,
+                "raw_scale": raw_max,
                 "frames_used": used,
                 "frames_skipped": skipped_total,
                 "skipped": skipped.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
                 "iterations": cal.iterations,
                 "converged": cal.converged,
-                "rmse": cal.rms_relative,
+                "change": cal.change,
+                "rms_relative": cal.rms_relative,
                 "coverage": cal.coverage,
+                "components": cal.components,
+                "smoothing_px": cal.smoothing.sigma_px,
+                "smoothing_cross_validated": cal.smoothing.cross_validated,
+                "smoothing_scores": cal.smoothing.scores,
+                "defective_pixels": cal.smoothing.defects,
+                "outliers": cal.outliers,
+                "std_median": sd_median,
+                "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
+                "warnings": cal.warnings,
             })
         );
     } else {
         println!(
-            "{used} frames used, {skipped_total} skipped{}",
-            if skipped.is_empty() {
-                String::new()
-            } else {
-                format!(
-                    " ({})",
-                    skipped
-                        .iter()
-                        .map(|(k, v)| format!("{v}: {k}"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
-            }
-        );
-        println!(
-            "{} iterations ({}), relative residual RMS {:.4}, {:.1}% of the pixels valid",
-            cal.iterations,
+            "{} after {} iterations (last change {:.4}%); relative residual RMS {:.4}; {} outliers dropped",
             if cal.converged {
                 "converged"
             } else {
-                "iteration limit"
+                "stopped"
             },
+            cal.iterations,
+            100.0 * cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rms_relative,
-            cal.coverage * 100.0
+            cal.outliers
         );
-        println!("wrote {} and {}", a.output.display(), smooth_path.display());
+        println!(
+            "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out",
+            100.0 * cal.coverage,
+            photometric::VignetteOptions::default().min_observations,
+            cal.smoothing.defects
+        );
+        println!(
+            "smoothing of {}: {:.1} px ({}); median standard error {:.3}%",
+            a.output.display(),
+            cal.smoothing.sigma_px,
+            if cal.smoothing.cross_validated {
+                "chosen by cross-validation between odd and even frames"
+            } else {
+                "given"
+            },
+            100.0 * sd_median
+        );
+        println!(
+            "wrote {}, {}, {} and {}",
+            a.output.display(),
+            raw_path.display(),
+            std_path.display(),
+            cov_path.display()
+        );
     }
     Ok(())
 }

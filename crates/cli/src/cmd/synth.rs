@@ -367,7 +367,10 @@ pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::S
     let (w, h) = (a.size.width, a.size.height);
     let frames = a.frames.max(2);
     if !(a.min_exposure.is_finite() && a.min_exposure > 0.0) {
-        anyhow::bail!("--min-exposure must be a positive number of ms, got {}", a.min_exposure);
+        anyhow::bail!(
+            "--min-exposure must be a positive number of ms, got {}",
+            a.min_exposure
+        );
     }
     let factor = match a.step {
         Some(s) if s.is_finite() && s > 1.0 => s,

@@ -1,0 +1,409 @@
+//! Smoothing of a noisy per-pixel map with a strength chosen from the data: local-linear
+//! regression (each pixel's value is the intercept of a weighted plane fitted to its
+//! neighbourhood, so that gradients at the image border are not biased as a plain average
+//! would bias them) with a Gaussian-like kernel (three box filters, constant cost per pixel
+//! whatever the width), weighted by the inverse variance of each pixel.
+//!
+//! The width is chosen by cross-validation between two independent halves of the data (the
+//! maps from the odd and from the even frames): the width whose smoothing of one half best
+//! predicts the other half, then scaled by `2^(-1/6)` for the full data (the optimal width
+//! of a local-linear smoother in two dimensions shrinks as the sixth root of the amount of
+//! data).
+
+use crate::PhotometricError;
+
+/// Which smoothing was applied and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmoothingChoice {
+    /// Standard deviation of the kernel in pixels (0: no smoothing).
+    pub sigma_px: f64,
+    /// Whether it was chosen by cross-validation (else given).
+    pub cross_validated: bool,
+    /// Candidate widths (pixels, of the half-data maps) and their cross-validation scores
+    /// (mean squared prediction error relative to the noise; smaller is better).
+    pub scores: Vec<(f64, f64)>,
+    /// Pixels left out as defective (far from their neighbourhood in both halves: hot, dead,
+    /// dust); the smooth map fills them.
+    pub defects: usize,
+}
+
+/// A smoothed map with its standard error.
+pub(crate) struct Smoothed {
+    pub smoothed: Vec<f64>,
+    pub smoothed_std: Vec<f64>,
+    /// Pixels found defective.
+    pub defective: Vec<bool>,
+    pub choice: SmoothingChoice,
+}
+
+/// Half-size of the neighbourhood against which defective pixels are found.
+const DEFECT_RADIUS: usize = 2;
+
+/// A pixel this many standard deviations from its neighbourhood is defective.
+const DEFECT_SIGMAS: f64 = 6.0;
+
+/// Box radii of the candidate kernels (`sigma = sqrt(r (r + 1))` for three passes).
+const RADII: [usize; 10] = [1, 2, 3, 4, 6, 8, 11, 16, 23, 32];
+
+fn sigma_of_radius(r: usize) -> f64 {
+    ((r * (r + 1)) as f64).sqrt()
+}
+
+fn radius_for_sigma(sigma: f64) -> usize {
+    (((1.0 + 4.0 * sigma * sigma).sqrt() - 1.0) / 2.0)
+        .round()
+        .max(0.0) as usize
+}
+
+/// One box pass of radius `r` along rows (zero outside the image).
+fn box_rows(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
+    let mut prefix = vec![0.0f64; w + 1];
+    for y in 0..h {
+        let row = &src[y * w..(y + 1) * w];
+        for x in 0..w {
+            prefix[x + 1] = prefix[x] + row[x];
+        }
+        for x in 0..w {
+            let lo = x.saturating_sub(r);
+            let hi = (x + r + 1).min(w);
+            out[y * w + x] = prefix[hi] - prefix[lo];
+        }
+    }
+}
+
+/// One box pass of radius `r` along columns.
+fn box_cols(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
+    let mut prefix = vec![0.0f64; h + 1];
+    for x in 0..w {
+        for y in 0..h {
+            prefix[y + 1] = prefix[y] + src[y * w + x];
+        }
+        for y in 0..h {
+            let lo = y.saturating_sub(r);
+            let hi = (y + r + 1).min(h);
+            out[y * w + x] = prefix[hi] - prefix[lo];
+        }
+    }
+}
+
+/// Three box passes in each direction: a kernel close to a Gaussian of `sigma_of_radius(r)`
+/// (unnormalised: the sums are ratios of smoothed images).
+fn blur(src: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+    let mut a = src.to_vec();
+    let mut b = vec![0.0f64; src.len()];
+    for _ in 0..3 {
+        box_rows(&a, w, h, r, &mut b);
+        std::mem::swap(&mut a, &mut b);
+    }
+    for _ in 0..3 {
+        box_cols(&a, w, h, r, &mut b);
+        std::mem::swap(&mut a, &mut b);
+    }
+    a
+}
+
+/// Local-linear smoothing of `v` (NaN = missing) with weights `wt` and box radius `r`;
+/// returns the smoothed map and, when `variance` is asked, the variance of each smoothed
+/// value for data of variance `1 / wt`.
+fn local_linear(
+    v: &[f64],
+    wt: &[f64],
+    w: usize,
+    h: usize,
+    r: usize,
+    variance: bool,
+) -> (Vec<f64>, Vec<f64>) {
+    let n = w * h;
+    if r == 0 {
+        let var = (0..n)
+            .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
+            .collect();
+        return (v.to_vec(), var);
+    }
+    let s = (w.max(h) as f64) / 2.0;
+    let xs = |i: usize| ((i % w) as f64 - w as f64 / 2.0) / s;
+    let ys = |i: usize| ((i / w) as f64 - h as f64 / 2.0) / s;
+    let wv: Vec<f64> = (0..n)
+        .map(|i| if v[i].is_finite() { wt[i] } else { 0.0 })
+        .collect();
+    let val: Vec<f64> = (0..n)
+        .map(|i| if v[i].is_finite() { v[i] } else { 0.0 })
+        .collect();
+    let img = |f: &dyn Fn(usize) -> f64| -> Vec<f64> {
+        let src: Vec<f64> = (0..n).map(f).collect();
+        blur(&src, w, h, r)
+    };
+    let s0 = img(&|i| wv[i]);
+    let sx = img(&|i| wv[i] * xs(i));
+    let sy = img(&|i| wv[i] * ys(i));
+    let sxx = img(&|i| wv[i] * xs(i) * xs(i));
+    let sxy = img(&|i| wv[i] * xs(i) * ys(i));
+    let syy = img(&|i| wv[i] * ys(i) * ys(i));
+    let sv = img(&|i| wv[i] * val[i]);
+    let svx = img(&|i| wv[i] * val[i] * xs(i));
+    let svy = img(&|i| wv[i] * val[i] * ys(i));
+    // for the variance: the same moments with the squared kernel, a kernel of sigma / sqrt 2
+    // scaled by 1 / (4 pi sigma^2) relative to a unit-sum kernel
+    let (q0, qx, qy, qxx, qxy, qyy, norm2) = if variance {
+        let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
+        let img2 = |f: &dyn Fn(usize) -> f64| -> Vec<f64> {
+            let src: Vec<f64> = (0..n).map(f).collect();
+            blur(&src, w, h, r2)
+        };
+        // kernel sums: sum K = (2r+1)^6, sum K2 (the r2 kernel) = (2 r2 + 1)^6; the squared
+        // unit-sum kernel sums to 1 / (4 pi sigma^2)
+        let sum_k = ((2 * r + 1) as f64).powi(6);
+        let sum_k2 = ((2 * r2 + 1) as f64).powi(6);
+        let sig = sigma_of_radius(r);
+        let factor = sum_k * sum_k / (4.0 * std::f64::consts::PI * sig * sig) / sum_k2;
+        (
+            img2(&|i| wv[i]),
+            img2(&|i| wv[i] * xs(i)),
+            img2(&|i| wv[i] * ys(i)),
+            img2(&|i| wv[i] * xs(i) * xs(i)),
+            img2(&|i| wv[i] * xs(i) * ys(i)),
+            img2(&|i| wv[i] * ys(i) * ys(i)),
+            factor,
+        )
+    } else {
+        (vec![], vec![], vec![], vec![], vec![], vec![], 0.0)
+    };
+    let mut out = vec![f64::NAN; n];
+    let mut var = vec![f64::NAN; n];
+    for i in 0..n {
+        if s0[i] <= 0.0 {
+            continue;
+        }
+        let (xp, yp) = (xs(i), ys(i));
+        let a01 = sx[i] - xp * s0[i];
+        let a02 = sy[i] - yp * s0[i];
+        let a11 = sxx[i] - 2.0 * xp * sx[i] + xp * xp * s0[i];
+        let a12 = sxy[i] - xp * sy[i] - yp * sx[i] + xp * yp * s0[i];
+        let a22 = syy[i] - 2.0 * yp * sy[i] + yp * yp * s0[i];
+        let m = nalgebra::Matrix3::new(s0[i], a01, a02, a01, a11, a12, a02, a12, a22);
+        let b = nalgebra::Vector3::new(sv[i], svx[i] - xp * sv[i], svy[i] - yp * sv[i]);
+        // a plane needs the neighbourhood to spread in both directions; else a constant
+        let det = m.determinant();
+        let scale = s0[i] * a11.abs().max(1e-300) * a22.abs().max(1e-300);
+        let inv = if det > 1e-9 * scale {
+            m.try_inverse()
+        } else {
+            None
+        };
+        match inv {
+            Some(mi) => {
+                out[i] = (mi * b)[0];
+                if variance {
+                    let c01 = qx[i] - xp * q0[i];
+                    let c02 = qy[i] - yp * q0[i];
+                    let c11 = qxx[i] - 2.0 * xp * qx[i] + xp * xp * q0[i];
+                    let c12 = qxy[i] - xp * qy[i] - yp * qx[i] + xp * yp * q0[i];
+                    let c22 = qyy[i] - 2.0 * yp * qy[i] + yp * yp * q0[i];
+                    let q = nalgebra::Matrix3::new(q0[i], c01, c02, c01, c11, c12, c02, c12, c22)
+                        * norm2;
+                    let e = mi.row(0);
+                    var[i] = (e * q * e.transpose())[(0, 0)].max(0.0);
+                }
+            }
+            None => {
+                out[i] = sv[i] / s0[i];
+                if variance {
+                    var[i] = q0[i] * norm2 / (s0[i] * s0[i]);
+                }
+            }
+        }
+    }
+    (out, var)
+}
+
+/// Chooses the smoothing (or applies `fixed`) and smooths `raw`; NaN pixels of `raw` are
+/// filled from their neighbourhood (the widest kernel where the chosen one sees no data).
+pub(crate) fn choose_smoothing(
+    w: usize,
+    h: usize,
+    raw: &[f64],
+    raw_var: &[f64],
+    odd: &[f64],
+    even: &[f64],
+    fixed: Option<f64>,
+) -> Result<Smoothed, PhotometricError> {
+    let n = w * h;
+    let mut wt: Vec<f64> = (0..n)
+        .map(|i| {
+            if raw[i].is_finite() && raw_var[i].is_finite() && raw_var[i] > 0.0 {
+                1.0 / raw_var[i]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    // defective pixels (hot, dead, a speck of dust) are real in both halves of the data, so
+    // cross-validation would keep them; they are found against a moderate smoothing and left
+    // out of the smooth map
+    // (against the median of the 5x5 neighbourhood, which one defect does not move)
+    let mut defects = 0usize;
+    let mut flagged = vec![false; n];
+    let mut nb = Vec::with_capacity(25);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if wt[i] <= 0.0 {
+                continue;
+            }
+            nb.clear();
+            for yy in y.saturating_sub(DEFECT_RADIUS)..(y + DEFECT_RADIUS + 1).min(h) {
+                for xx in x.saturating_sub(DEFECT_RADIUS)..(x + DEFECT_RADIUS + 1).min(w) {
+                    let j = yy * w + xx;
+                    if j != i && wt[j] > 0.0 {
+                        nb.push(raw[j]);
+                    }
+                }
+            }
+            if nb.len() < 4 {
+                continue;
+            }
+            nb.sort_by(f64::total_cmp);
+            let med = nb[nb.len() / 2];
+            let z = (raw[i] - med) / (2.0 * raw_var[i]).sqrt();
+            if z.abs() > DEFECT_SIGMAS {
+                flagged[i] = true;
+            }
+        }
+    }
+    for i in 0..n {
+        if flagged[i] {
+            wt[i] = 0.0;
+            defects += 1;
+        }
+    }
+    // the halves have about twice the variance: the same relative weights
+    let mut scores = Vec::new();
+    let (radius, cross_validated) = match fixed {
+        Some(s) => (radius_for_sigma(s.max(0.0)), false),
+        None => {
+            let mut best = (f64::INFINITY, 0usize);
+            let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
+            for &r in &candidates {
+                let (so, _) = local_linear(odd, &wt, w, h, r, false);
+                let (se, _) = local_linear(even, &wt, w, h, r, false);
+                let mut s = 0.0;
+                let mut cnt = 0.0;
+                for i in 0..n {
+                    if odd[i].is_finite() && even[i].is_finite() && wt[i] > 0.0 {
+                        if so[i].is_finite() {
+                            s += (so[i] - even[i]).powi(2) * wt[i] / 2.0;
+                            cnt += 1.0;
+                        }
+                        if se[i].is_finite() {
+                            s += (se[i] - odd[i]).powi(2) * wt[i] / 2.0;
+                            cnt += 1.0;
+                        }
+                    }
+                }
+                let score = if cnt > 0.0 { s / cnt } else { f64::INFINITY };
+                scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
+                if score < best.0 {
+                    best = (score, r);
+                }
+            }
+            if !best.0.is_finite() {
+                return Err(PhotometricError::Calibration(
+                    "the odd and the even frames see no pixel in common; the smoothing cannot be chosen (record more frames)".into(),
+                ));
+            }
+            // the full data: a kernel 2^(-1/6) as wide
+            let s_half = if best.1 == 0 {
+                0.0
+            } else {
+                sigma_of_radius(best.1)
+            };
+            (radius_for_sigma(s_half * 2f64.powf(-1.0 / 6.0)), true)
+        }
+    };
+    let (mut smoothed, mut var) = local_linear(raw, &wt, w, h, radius, true);
+    // the variance above treats pixels as independent; JPEG's 8x8 blocks and the shared
+    // plane irradiance correlate neighbours. The same smoothing of the odd and of the even
+    // half differs by noise alone: its spread calibrates the smoothed map's variance
+    // (each half has about twice the variance of the whole: four times for the difference)
+    if radius > 0 {
+        let (so, _) = local_linear(odd, &wt, w, h, radius, false);
+        let (se, _) = local_linear(even, &wt, w, h, radius, false);
+        let (mut num, mut den) = (0.0, 0.0);
+        for i in 0..n {
+            if wt[i] > 0.0 && so[i].is_finite() && se[i].is_finite() && var[i] > 0.0 {
+                num += (so[i] - se[i]).powi(2);
+                den += 4.0 * var[i];
+            }
+        }
+        if den > 0.0 {
+            let kappa = (num / den).clamp(0.25, 100.0);
+            for v in var.iter_mut() {
+                *v *= kappa;
+            }
+        }
+    }
+    // fill what the kernel does not reach
+    if smoothed.iter().any(|v| !v.is_finite()) {
+        let wide = *RADII.last().unwrap_or(&32);
+        let (fill, fill_var) = local_linear(raw, &wt, w, h, wide.max(radius), true);
+        for i in 0..n {
+            if !smoothed[i].is_finite() {
+                smoothed[i] = fill[i];
+                var[i] = fill_var[i];
+            }
+        }
+    }
+    if smoothed.iter().any(|v| !v.is_finite()) {
+        return Err(PhotometricError::Calibration(
+            "parts of the image are farther than the widest smoothing from any calibrated pixel; film the wall so that it covers the whole image".into(),
+        ));
+    }
+    let smoothed_std = var.iter().map(|v| v.max(0.0).sqrt()).collect();
+    Ok(Smoothed {
+        smoothed,
+        smoothed_std,
+        defective: flagged,
+        choice: SmoothingChoice {
+            sigma_px: if radius == 0 {
+                0.0
+            } else {
+                sigma_of_radius(radius)
+            },
+            cross_validated,
+            scores,
+            defects,
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_hole_does_not_disturb_a_plane() {
+        let (w, h) = (64usize, 48usize);
+        let mut v: Vec<f64> = (0..w * h)
+            .map(|i| 1.0 + 0.001 * (i % w) as f64 - 0.002 * (i / w) as f64)
+            .collect();
+        v[20 * w + 30] = f64::NAN;
+        let wt: Vec<f64> = v
+            .iter()
+            .map(|x| if x.is_finite() { 1e5 } else { 0.0 })
+            .collect();
+        for r in [1, 2, 4, 8] {
+            let (s, var) = local_linear(&v, &wt, w, h, r, true);
+            for i in 0..w * h {
+                let truth = 1.0 + 0.001 * (i % w) as f64 - 0.002 * (i / w) as f64;
+                assert!(
+                    (s[i] - truth).abs() < 1e-9,
+                    "r {r} at {} {}: {} vs {truth}",
+                    i % w,
+                    i / w,
+                    s[i]
+                );
+                assert!(var[i].is_finite() && var[i] > 0.0);
+            }
+        }
+    }
+}
