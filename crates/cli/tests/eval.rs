@@ -175,7 +175,7 @@ fn batch_csv_table_and_cumulative_plots() {
     assert!(stderr(&o).contains("notes.txt") && stderr(&o).contains("sequence_09"));
     let text = std::fs::read_to_string(&csv).unwrap();
     assert_eq!(text.lines().count(), 17);
-    assert!(text.starts_with("method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses\n"));
+    assert!(text.starts_with("method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses,reason\n"));
 
     for (metric, split, file) in [
         ("e_align", None, "a.png"),
@@ -235,4 +235,13 @@ fn batch_csv_table_and_cumulative_plots() {
     ]);
     assert!(o.status.success());
     assert!(stdout(&o).contains("17 runs"));
+    // the unreadable run is failed with its reason in the table, read back as written
+    let rows =
+        eval_metrics::parse_csv(&std::fs::read_to_string(d.join("r2.csv")).unwrap()).unwrap();
+    let bad = rows.iter().find(|r| r.key.run == 7).unwrap();
+    let reason = bad.failure.as_deref().unwrap();
+    assert!(
+        reason.contains("fwd_7.txt") && reason.contains("line 1"),
+        "{reason}"
+    );
 }
