@@ -53,7 +53,7 @@ const LEVELS: usize = 256;
 const GAUGE: usize = 128;
 
 /// Options of [`calibrate_response`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ResponseOptions {
     /// Iteration limit.
     pub max_iterations: usize,
@@ -87,7 +87,7 @@ impl Default for ResponseOptions {
 }
 
 /// The result of [`calibrate_response`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct ResponseCalibration {
     /// The inverse response, `U(255) = 255`, strictly increasing.
     pub response: InverseResponse,

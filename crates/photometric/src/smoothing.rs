@@ -13,7 +13,7 @@
 use crate::PhotometricError;
 
 /// Which smoothing was applied and why.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SmoothingChoice {
     /// Standard deviation of the kernel in pixels (0: no smoothing).
     pub sigma_px: f64,

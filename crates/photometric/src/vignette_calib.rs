@@ -32,7 +32,7 @@ use crate::{InverseResponse, PhotometricError};
 
 /// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`, the plane being
 /// `z = 0` with the marker the unit square at its origin.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanePose {
     /// Rotation, row-major.
     pub r: [[f64; 3]; 3],
@@ -64,7 +64,7 @@ pub trait PlaneFrames: Sync {
 }
 
 /// Options of [`calibrate_vignette`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct VignetteOptions {
     /// Iteration limit.
     pub max_iterations: usize,
@@ -108,7 +108,7 @@ impl Default for VignetteOptions {
 }
 
 /// The result of [`calibrate_vignette`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct VignetteCalibration {
     /// The map recommended for correction: the raw map smoothed as chosen, `max = 1`, finite
     /// everywhere.

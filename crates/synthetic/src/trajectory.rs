@@ -33,7 +33,7 @@ pub struct Path {
 }
 
 /// Parameters of [`benchmark_path`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PathConfig {
     /// Number of frames.
     pub frames: usize,
@@ -222,7 +222,7 @@ impl Path {
 }
 
 /// Drift injected into a synthetic estimate.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Drift {
     /// `(frame, factor)`: from this frame of the playback on, motion is scaled by `factor`.
     pub scale_jumps: Vec<(usize, f64)>,
@@ -237,7 +237,7 @@ pub struct Drift {
 }
 
 /// How a synthetic estimate is produced and written.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct EstimateConfig {
     /// The drift.
     pub drift: Drift,
