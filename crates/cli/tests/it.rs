@@ -5,4 +5,5 @@ mod calib;
 mod camera;
 mod common;
 mod eval;
+mod figures;
 mod rectify;

@@ -238,6 +238,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     let std_path = sibling(&a.output, "_std");
     let mut outs: Vec<&Path> = vec![&a.output, &std_path];
     if let Some(p) = &a.plot {
+        plot::format_of(p)?;
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;
@@ -408,7 +409,11 @@ pub fn response_figure(
             PALETTE[2],
         ));
     }
-    let mut c3 = Chart::new("observations", "grey value I", "observations (log10)");
+    let mut c3 = Chart::new(
+        "observations",
+        "grey value I",
+        "log10 of the number of observations",
+    );
     c3.legend = Some(Corner::TopRight);
     c3.x_range = Some([0.0, 255.0]);
     let steps = |h: &[u64]| -> Vec<[f64; 2]> {
@@ -495,12 +500,21 @@ pub fn vignette_figure(
         })
     };
     let sd = cal.std_error.data();
-    let sd_max = sd.iter().copied().fold(0.0f32, f32::max).max(1e-6);
+    // the colour scale of the standard error ends at its 99th percentile: a few border
+    // pixels with little data would otherwise leave the rest of the map one colour
+    let mut sd_sorted: Vec<f32> = sd.iter().copied().filter(|v| v.is_finite()).collect();
+    sd_sorted.sort_unstable_by(f32::total_cmp);
+    let sd_max = sd_sorted
+        .get(sd_sorted.len() * 99 / 100)
+        .copied()
+        .unwrap_or(0.0)
+        .max(1e-6);
     let counts: Vec<f32> = cal.counts.data().iter().map(|&c| c as f32).collect();
     let c_max = counts.iter().copied().fold(0.0f32, f32::max).max(1.0);
-    let section = |title: &str, axis: &str, n: usize, at: &dyn Fn(usize) -> usize| {
+    let section = |title: &str, axis: &str, n: usize, at: &dyn Fn(usize) -> usize, legend: bool| {
         let mut c = Chart::new(title, axis, "V");
-        c.legend = Some(Corner::BottomRight);
+        // one legend for both cross-sections
+        c.legend = legend.then_some(Corner::BottomRight);
         let val = |img: &Image<f32>, i: usize| img.data()[at(i)] as f64;
         c.series.push(Series::band(
             "recommended, 2 sigma",
@@ -538,7 +552,7 @@ pub fn vignette_figure(
     };
     let fig = Figure {
         width: 1650,
-        height: 1000,
+        height: 900,
         panels: vec![
             (
                 heat(
@@ -547,28 +561,28 @@ pub fn vignette_figure(
                     [0.0, 1.0],
                     "V",
                 ),
-                [0.0, 0.0, 0.34, 0.5],
+                [0.0, 0.0, 0.34, 0.42],
             ),
             (
                 heat(
-                    "standard error of V",
+                    "standard error of V (colours clipped at 99%)",
                     sd.to_vec(),
                     [0.0, sd_max],
                     "standard error",
                 ),
-                [0.34, 0.0, 0.33, 0.5],
+                [0.34, 0.0, 0.33, 0.42],
             ),
             (
                 heat("coverage", counts, [0.0, c_max], "observations per pixel"),
-                [0.67, 0.0, 0.33, 0.5],
+                [0.67, 0.0, 0.33, 0.42],
             ),
             (
-                section("middle row", "x (pixels)", w, &|x| (h / 2) * w + x),
-                [0.0, 0.5, 0.5, 0.5],
+                section("middle row", "x (pixels)", w, &|x| (h / 2) * w + x, true),
+                [0.0, 0.42, 0.5, 0.58],
             ),
             (
-                section("middle column", "y (pixels)", h, &|y| y * w + w / 2),
-                [0.5, 0.5, 0.5, 0.5],
+                section("middle column", "y (pixels)", h, &|y| y * w + w / 2, false),
+                [0.5, 0.42, 0.5, 0.58],
             ),
         ],
     };
@@ -767,6 +781,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
     let cov_path = sibling(&a.output, "_coverage");
     let mut outs: Vec<&Path> = vec![&a.output, &raw_path, &std_path, &cov_path];
     if let Some(p) = &a.plot {
+        plot::format_of(p)?;
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;

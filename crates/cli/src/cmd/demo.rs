@@ -90,7 +90,7 @@ fn metric_study(seed: u64, path: &Path) -> Result<()> {
     let mut c = Chart::new(
         "metric study: where the drift happens (dashed: scale x0.8, solid: rotation 10 deg)",
         "time of the jump (fraction of the sequence)",
-        "error",
+        "error (ground-truth length unit)",
     );
     c.legend = Some(Corner::TopRight);
     c.x_range = Some([0.0, 1.0]);

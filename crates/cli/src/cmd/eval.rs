@@ -158,6 +158,9 @@ fn fmt(v: f64, digits: usize) -> String {
 
 /// Runs `monovo eval`.
 pub fn run(args: &Args) -> Result<()> {
+    if let Some(p) = &args.plot {
+        plot::format_of(p)?;
+    }
     let gt = load_ground_truth(&args.gt)?;
     let traj = load_trajectory(&args.trajectory, args.format, args.times.as_deref())?;
     let e = evaluate(&traj, &gt);
@@ -274,7 +277,11 @@ pub fn alignment_figure(e: &Evaluation, gt: &GroundTruth, path: &Path) -> Result
         ([b[0] - pad, b[1] + pad], [b[2] - pad, b[3] + pad])
     };
     let mk = |title: &str, range: Option<([f64; 2], [f64; 2])>, legend: bool| {
-        let mut c = Chart::new(title, "x (ground-truth frame, top-down)", "y");
+        let mut c = Chart::new(
+            title,
+            "top-down x (ground-truth length unit)",
+            "top-down y (ground-truth length unit)",
+        );
         c.equal_aspect = true;
         c.legend = legend.then_some(Corner::TopRight);
         c.series.push(Series::line(
