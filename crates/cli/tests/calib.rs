@@ -65,6 +65,50 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
         ],
     );
 
+    // options from --config, a flag over the file, and a bad file refused before any work
+    let config = d.join("calib.toml");
+    std::fs::write(
+        &config,
+        "[response]\nmax_iterations = 2\ntolerance = 1e-9\n",
+    )
+    .unwrap();
+    let iterations = |extra: &[&str]| {
+        let out = d.join("config_pcalib.txt");
+        let mut args = vec![
+            "calib",
+            "response",
+            sweep.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--force",
+            "--json",
+            "--config",
+            config.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = monovo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        v["iterations"].as_u64().unwrap()
+    };
+    assert_eq!(iterations(&[]), 2);
+    assert_eq!(iterations(&["--max-iterations", "1"]), 1);
+    std::fs::write(&config, "[response]\nmax_iterations = 2\nsmoothnes = 1\n").unwrap();
+    let bad_out = d.join("bad_config_pcalib.txt");
+    let o = monovo(&[
+        "calib",
+        "response",
+        sweep.to_str().unwrap(),
+        "-o",
+        bad_out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("calib.toml") && e.contains("smoothnes"), "{e}");
+    assert!(!bad_out.exists());
+
     // outputs are not replaced without --force, and nothing is computed before that check
     let o = monovo(&[
         "calib",

@@ -53,7 +53,10 @@ const LEVELS: usize = 256;
 const GAUGE: usize = 128;
 
 /// Options of [`calibrate_response`].
+///
+/// Deserialised fields that are absent keep their defaults; unknown ones are an error.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ResponseOptions {
     /// Iteration limit.
     pub max_iterations: usize,

@@ -64,7 +64,10 @@ pub trait PlaneFrames: Sync {
 }
 
 /// Options of [`calibrate_vignette`].
+///
+/// Deserialised fields that are absent keep their defaults; unknown ones are an error.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct VignetteOptions {
     /// Iteration limit.
     pub max_iterations: usize,

@@ -242,9 +242,10 @@ pub fn run(args: &Args) -> Result<()> {
         pcalib: None,
         poses: None,
         marker_id: 213,
-        max_iterations: photometric::VignetteOptions::default().max_iterations,
+        config: None,
+        max_iterations: None,
         smoothing: None,
-        registration_px: photometric::VignetteOptions::default().registration_px,
+        registration_px: None,
         plot: None,
         json: true,
     })?;
