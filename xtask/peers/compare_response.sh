@@ -9,7 +9,7 @@ here="$(cd "$(dirname "$0")" && pwd)"
 monovo="${MONOVO:-$here/../../target/release/monovo}"
 work="${1:-$(mktemp -d)}"
 mkdir -p "$work"
-printf '%-14s %-16s %-10s %8s %10s\n' sensor sweep method max shape_rms
+printf '%-14s %-16s %-10s %8s %10s %8s %10s\n' sensor sweep method max shape_rms max_250 rms_250
 for noise in low typical high; do
   for store in png jpeg; do
     [ "$store" = jpeg ] && [ "$noise" = low ] && continue
@@ -30,7 +30,7 @@ d = json.load(open(sys.argv[1]))
 for method, key in (("monovo", sys.argv[2]), ("debevec", "debevec"), ("robertson", "robertson")):
     r = d.get(key) or {}
     fmt = lambda v: "-" if v is None else f"{v:.3f}"
-    print(f"{sys.argv[3]:<14} {sys.argv[4]:<16} {method:<10} {fmt(r.get('max')):>8} {fmt(r.get('shape_rms')):>10}")
+    print(f"{sys.argv[3]:<14} {sys.argv[4]:<16} {method:<10} {fmt(r.get('max')):>8} {fmt(r.get('shape_rms')):>10} {fmt(r.get('max_250')):>8} {fmt(r.get('shape_rms_250')):>10}")
 PY
     done
   done

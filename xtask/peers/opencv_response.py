@@ -35,6 +35,9 @@ Metrics, over k = 0..254 against the truth U_true:
     max        max |U(k) - U_true(k)|   (grey levels; depends on the U(255) scale)
     shape_rms  sqrt(mean (s U(k) - U_true(k))^2), s = sum U U_true / sum U^2
                (the error of the curve's shape, free of the scale)
+    max_250, shape_rms_250  the same over k = 0..250 with the best scale over
+               0..250 (free of the top codes and of the U(255) normalisation:
+               the kindest score for a method that fails only near saturation)
     increasing U strictly increasing over 0..255 (DSO rejects anything else)
     time_s     wall time of the OpenCV process() call alone
 
@@ -124,10 +127,16 @@ def score(u, u_true):
     if not np.isfinite(a).all():
         return {"max": None, "shape_rms": None, "scale": None, "increasing": False}
     s = float(a @ t / (a @ a))
+    # the same without the top codes (251..254, where saturated pixels pull every
+    # estimator) and without the U(255) normalisation: the best scale over 0..250
+    a2, t2 = u[:251], u_true[:251]
+    s2 = float(a2 @ t2 / (a2 @ a2))
     return {
         "max": float(np.max(np.abs(a - t))),
         "shape_rms": float(np.sqrt(np.mean((s * a - t) ** 2))),
         "scale": s,
+        "max_250": float(np.max(np.abs(s2 * a2 - t2))),
+        "shape_rms_250": float(np.sqrt(np.mean((s2 * a2 - t2) ** 2))),
         "increasing": bool(np.all(np.diff(u) > 0)),
     }
 
