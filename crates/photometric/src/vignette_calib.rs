@@ -571,86 +571,96 @@ const COARSE_TOLERANCE: f64 = 2e-4;
 const ANDERSON_MEMORY: usize = 5;
 
 /// Anderson mixing of the fixed-point iteration on `V` (memory `m`): the next iterate
-/// combines the last ones so that the combined residual is smallest.
+/// combines the last ones so that the combined residual is smallest. Only the last iterate
+/// and residual are kept in full precision; the history is their differences in `f32`
+/// (about 7 significant digits of a step, far below the tolerance), which keeps the memory
+/// at `2 m + 2` vectors of half size.
 struct Anderson {
     m: usize,
-    xs: Vec<Vec<f64>>,
-    fs: Vec<Vec<f64>>,
+    last: Option<(Vec<f64>, Vec<f64>)>,
+    /// Differences of the residuals `f = g(x) - x` of consecutive iterations.
+    df: std::collections::VecDeque<Vec<f32>>,
+    /// Differences of the images `g(x)` (`dx + df`).
+    dg: std::collections::VecDeque<Vec<f32>>,
 }
 
 impl Anderson {
     fn new(m: usize) -> Anderson {
         Anderson {
             m,
-            xs: Vec::new(),
-            fs: Vec::new(),
+            last: None,
+            df: Default::default(),
+            dg: Default::default(),
         }
     }
 
     /// Given the iterate `x` and its image `gx` under the iteration, the next iterate.
     fn step(&mut self, x: &[f64], gx: &[f64]) -> Vec<f64> {
         let f: Vec<f64> = gx.iter().zip(x).map(|(a, b)| a - b).collect();
-        self.xs.push(x.to_vec());
-        self.fs.push(f.clone());
-        if self.xs.len() > self.m + 1 {
-            self.xs.remove(0);
-            self.fs.remove(0);
+        if let Some((lx, lf)) = self.last.take() {
+            if self.df.len() == self.m {
+                self.df.pop_front();
+                self.dg.pop_front();
+            }
+            self.df
+                .push_back(f.iter().zip(&lf).map(|(a, b)| (a - b) as f32).collect());
+            self.dg.push_back(
+                gx.iter()
+                    .zip(&lx)
+                    .zip(&lf)
+                    .map(|((g, x0), f0)| (g - (x0 + f0)) as f32)
+                    .collect(),
+            );
         }
-        let n = self.fs.len();
-        if n < 2 {
-            return gx.to_vec();
+        let k = self.df.len();
+        let mut out = gx.to_vec();
+        self.last = Some((x.to_vec(), f));
+        if k == 0 {
+            return out;
         }
-        // differences of residuals; least squares for the mixing coefficients
-        let k = n - 1;
-        let df: Vec<Vec<f64>> = (0..k)
-            .map(|j| {
-                self.fs[j + 1]
-                    .iter()
-                    .zip(&self.fs[j])
-                    .map(|(a, b)| a - b)
-                    .collect()
-            })
-            .collect();
+        let Some((_, f)) = &self.last else {
+            return out;
+        };
+        // least squares for the mixing coefficients
         let mut ata = nalgebra::DMatrix::<f64>::zeros(k, k);
         let mut atb = nalgebra::DVector::<f64>::zeros(k);
         for a in 0..k {
             for b in a..k {
-                let d: f64 = df[a].iter().zip(&df[b]).map(|(p, q)| p * q).sum();
+                let d: f64 = self.df[a]
+                    .iter()
+                    .zip(&self.df[b])
+                    .map(|(p, q)| *p as f64 * *q as f64)
+                    .sum();
                 ata[(a, b)] = d;
                 ata[(b, a)] = d;
             }
-            atb[a] = df[a].iter().zip(&f).map(|(p, q)| p * q).sum();
+            atb[a] = self.df[a].iter().zip(f).map(|(p, q)| *p as f64 * q).sum();
         }
         let scale = (0..k).map(|a| ata[(a, a)]).fold(0.0, f64::max).max(1e-300);
         for a in 0..k {
             ata[(a, a)] += 1e-10 * scale;
         }
         let Some(gamma) = ata.cholesky().map(|c| c.solve(&atb)) else {
-            self.xs.clear();
-            self.fs.clear();
-            return gx.to_vec();
+            self.reset();
+            return out;
         };
-        // x_next = gx - sum gamma_j (dx_j + df_j), dx_j the differences of the iterates
-        let mut out = gx.to_vec();
-        for j in 0..k {
+        // x_next = gx - sum gamma_j dg_j
+        for (j, dg) in self.dg.iter().enumerate() {
             let gj = gamma[j];
             if gj == 0.0 || !gj.is_finite() {
                 continue;
             }
-            for ((o, (x1, x0)), (f1, f0)) in out
-                .iter_mut()
-                .zip(self.xs[j + 1].iter().zip(&self.xs[j]))
-                .zip(self.fs[j + 1].iter().zip(&self.fs[j]))
-            {
-                *o -= gj * ((x1 - x0) + (f1 - f0));
+            for (o, d) in out.iter_mut().zip(dg) {
+                *o -= gj * *d as f64;
             }
         }
         out
     }
 
     fn reset(&mut self) {
-        self.xs.clear();
-        self.fs.clear();
+        self.last = None;
+        self.df.clear();
+        self.dg.clear();
     }
 }
 
