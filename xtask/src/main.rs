@@ -1,10 +1,12 @@
-//! Developer tasks of the monovo workspace: `cargo xtask bench-synthetic [--quick] [--json FILE]`.
+//! Developer tasks of the monovo workspace: `cargo xtask bench-synthetic [--quick] [--json FILE]`,
+//! `cargo xtask response-study`, `cargo xtask exposure-study`.
 //!
 //! bench-synthetic runs every stage on synthetic data with known truth, prints accuracy
 //! against the truth and throughput / wall time / peak memory per stage, and fails when a
 //! figure is worse than the thresholds committed in `xtask/thresholds.json`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod exposure;
 mod response;
 mod stages;
 mod vignette;
@@ -63,6 +65,9 @@ fn run() -> Result<()> {
     };
     if task == "response-study" {
         return response::study();
+    }
+    if task == "exposure-study" {
+        return exposure::study(args);
     }
     if task != "bench-synthetic" {
         bail!("unknown task `{task}`\n{}", usage());

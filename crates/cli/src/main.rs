@@ -33,6 +33,8 @@ enum Command {
     Rectify(cmd::rectify::Command),
     /// Calibrate the response (and the vignette) of your own camera.
     Calib(cmd::calib::Args),
+    /// Check logged exposure times against the images, or estimate missing ones.
+    Exposure(cmd::exposure::Args),
     /// Score one trajectory with the paper's loop-closure drift metrics.
     Eval(cmd::eval::Args),
     /// Score every run of a results tree in parallel into results.csv.
@@ -51,6 +53,7 @@ fn main() -> ExitCode {
         Command::Info(args) => cmd::info::run(&args),
         Command::Rectify(args) => cmd::rectify::run_command(&args),
         Command::Calib(args) => cmd::calib::run(&args),
+        Command::Exposure(args) => cmd::exposure::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),

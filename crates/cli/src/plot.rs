@@ -49,6 +49,8 @@ pub struct Series {
     pub dashed: bool,
     /// A band: the area between `points` (lower edge) and these upper points, filled.
     pub band_upper: Option<Vec<[f64; 2]>>,
+    /// A filled circle of this radius (pixels) at every point.
+    pub marker: Option<f64>,
 }
 
 impl Series {
@@ -61,6 +63,16 @@ impl Series {
             width: 2.0,
             dashed: false,
             band_upper: None,
+            marker: None,
+        }
+    }
+
+    /// Points drawn as filled circles of radius 4, without a line.
+    pub fn points(label: impl Into<String>, points: Vec<[f64; 2]>, color: Rgb) -> Series {
+        Series {
+            width: 0.0,
+            marker: Some(4.0),
+            ..Series::line(label, points, color)
         }
     }
 
@@ -79,6 +91,7 @@ impl Series {
             width: 2.0,
             dashed: false,
             band_upper: Some(upper),
+            marker: None,
         }
     }
 
@@ -779,7 +792,7 @@ fn clip_polygon(poly: Vec<[f64; 2]>, r: [f64; 4]) -> Vec<[f64; 2]> {
 
 /// A legend's entries, measured.
 struct Legend {
-    entries: Vec<(String, Rgb, f64, bool, bool)>,
+    entries: Vec<(String, Rgb, f64, bool, bool, Option<f64>)>,
     text_w: i32,
     line_h: i32,
 }
@@ -804,6 +817,7 @@ impl Legend {
                     s.width,
                     s.dashed,
                     s.band_upper.is_some(),
+                    s.marker,
                 )
             })
             .collect();
@@ -854,7 +868,7 @@ impl Legend {
         ))
         .map_err(plot_err)?;
         let font = k.font(LEGEND_PX).pos(Pos::new(HPos::Left, VPos::Center));
-        for (i, (label, c, width, dashed, band)) in self.entries.iter().enumerate() {
+        for (i, (label, c, width, dashed, band, marker)) in self.entries.iter().enumerate() {
             let (col, row) = ((i as i32) / rows, (i as i32) % rows);
             let x = x0 + col * col_w + k.px(Self::PAD);
             let y = y0 + k.px(Self::PAD / 2.0) + row * self.line_h + self.line_h / 2;
@@ -878,8 +892,12 @@ impl Legend {
                     ))
                     .map_err(plot_err)?;
                 }
-            } else {
+            } else if *width > 0.0 {
                 area.draw(&PathElement::new(vec![(x, y), (x + len, y)], style))
+                    .map_err(plot_err)?;
+            }
+            if let Some(r) = marker {
+                area.draw(&Circle::new((x + len / 2, y), k.px(*r), color(*c).filled()))
                     .map_err(plot_err)?;
             }
             area.draw(&Text::new(
@@ -1238,6 +1256,30 @@ where
                     .draw_series(std::iter::once(Polygon::new(pts, color(s.color).filled())))
                     .map_err(plot_err)?;
             }
+            continue;
+        }
+        if let Some(r) = s.marker {
+            let dots: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .filter(|p| space.valid(**p))
+                .map(|p| space.to_axis(*p))
+                .filter(|p| {
+                    p[0] >= clip[0] && p[0] <= clip[1] && p[1] >= clip[2] && p[1] <= clip[3]
+                })
+                .map(|p| {
+                    let d = space.to_data(p);
+                    (d[0], d[1])
+                })
+                .collect();
+            chart
+                .draw_series(
+                    dots.into_iter()
+                        .map(|p| Circle::new(p, k.px(r), color(s.color).filled())),
+                )
+                .map_err(plot_err)?;
+        }
+        if s.width <= 0.0 {
             continue;
         }
         let style = color(s.color).stroke_width(k.upx(s.width));

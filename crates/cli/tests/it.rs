@@ -5,5 +5,6 @@ mod calib;
 mod camera;
 mod common;
 mod eval;
+mod exposure;
 mod figures;
 mod rectify;

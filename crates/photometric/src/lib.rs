@@ -1,7 +1,8 @@
 //! Photometric calibration of the TUM monoVO benchmark (paper section 2.3): the inverse
 //! response `U` ([`InverseResponse`], pcalib.txt), the vignette `V` ([`Vignette`],
 //! vignette.png), and the correction `I -> U(I) / V` or irradiance `U(I) / (t V)`
-//! ([`Correction`]), optionally fused with a rectification map.
+//! ([`Correction`]), optionally fused with a rectification map; exposure ratios measured
+//! from the images, to check logged exposures and to estimate missing ones ([`exposure`]).
 //!
 //! # Example
 //!
@@ -29,6 +30,7 @@
 
 mod correct;
 mod error;
+pub mod exposure;
 pub mod marker;
 mod noise;
 mod response;

@@ -2,6 +2,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod correct;
+mod exposure;
 mod files;
 mod marker;
 mod response;

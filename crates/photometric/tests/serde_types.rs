@@ -33,3 +33,19 @@ fn the_inverse_response_serialises_its_table() {
     assert_eq!(v["table"].as_array().unwrap().len(), 256);
     assert_eq!(v["table"][255], 255.0);
 }
+
+#[test]
+fn exposure_options_round_trip_and_unknown_fields_are_refused() {
+    use photometric::exposure::ExposureOptions;
+    let o = ExposureOptions {
+        min_grey: 20.0,
+        window: 5,
+        ..ExposureOptions::default()
+    };
+    let back: ExposureOptions = serde_json::from_str(&serde_json::to_string(&o).unwrap()).unwrap();
+    assert_eq!(back, o);
+    let partial: ExposureOptions = serde_json::from_str(r#"{"tile": 24}"#).unwrap();
+    assert_eq!(partial.tile, 24);
+    assert_eq!(partial.max_grey, ExposureOptions::default().max_grey);
+    assert!(serde_json::from_str::<ExposureOptions>(r#"{"tiles": 24}"#).is_err());
+}

@@ -125,6 +125,11 @@ pub struct SequenceConfig {
     pub sensor: Sensor,
     /// The camera response.
     pub response: ResponseCurve,
+    /// How the exposure changes from frame to frame.
+    pub exposure: ExposureMode,
+    /// Length of the camera path (the dataset's are normalised to about 100; a walk at
+    /// 1 m/s at 25 fps covers 0.04 per frame).
+    pub path_length: f64,
 }
 
 impl Default for SequenceConfig {
@@ -136,8 +141,107 @@ impl Default for SequenceConfig {
             fps: 25.0,
             sensor: Sensor::default(),
             response: ResponseCurve::Dataset,
+            exposure: ExposureMode::Smooth,
+            path_length: 100.0,
         }
     }
+}
+
+/// How the exposure time of a synthetic sequence changes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ExposureMode {
+    /// A slow, smooth wander between about 2 and 14 ms (three slow and eleven faster
+    /// oscillations over the sequence), independent of the scene.
+    Smooth,
+    /// An auto-exposure controller, as machine-vision cameras run it: from the mean
+    /// brightness of frame `i` it sets frame `i + 1`'s exposure halfway (in log) towards the
+    /// one that would give a mean of 40% of saturation, with a metering noise of 4% (log
+    /// standard deviation) per frame, within 0.05..30 ms. Consecutive exposures differ by a
+    /// few percent, more where the view turns to brighter or darker walls.
+    Auto,
+}
+
+impl ExposureMode {
+    /// The mode's name on command lines (`smooth`, `auto`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ExposureMode::Smooth => "smooth",
+            ExposureMode::Auto => "auto",
+        }
+    }
+}
+
+impl std::fmt::Display for ExposureMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ExposureMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "smooth" => Ok(ExposureMode::Smooth),
+            "auto" => Ok(ExposureMode::Auto),
+            other => Err(format!(
+                "unknown exposure mode `{other}`: expected smooth or auto"
+            )),
+        }
+    }
+}
+
+/// A logged exposure that belongs to a neighbouring frame (see [`shift_exposure_log`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LogShift {
+    /// The frame whose logged exposure is wrong.
+    pub frame: usize,
+    /// The frame whose exposure was logged in its place (`frame - 1` or `frame + 1`).
+    pub source: usize,
+}
+
+/// Injects `count` one-frame shifts into an exposure log, as an asynchronous camera SDK
+/// makes them: the logged exposure of a frame is its previous or next frame's. The shifted
+/// frames are drawn from a seed, at least three frames apart (isolated shifts) and only
+/// where the shift changes the logged value by at least `min_change` (relative; a shift
+/// that changes nothing is no error). Returns the log and the shifts in frame order; fewer
+/// shifts than asked when the exposures offer too few such places.
+pub fn shift_exposure_log(
+    exposures_ms: &[f64],
+    count: usize,
+    min_change: f64,
+    seed: u64,
+) -> (Vec<f64>, Vec<LogShift>) {
+    let n = exposures_ms.len();
+    let mut log = exposures_ms.to_vec();
+    let mut shifts: Vec<LogShift> = Vec::new();
+    if n < 3 {
+        return (log, shifts);
+    }
+    let mut rng = Rng::derive(seed, 77);
+    let changes = |k: usize, s: usize| (exposures_ms[s] / exposures_ms[k]).ln().abs();
+    let mut attempts = 0;
+    while shifts.len() < count && attempts < 100 * (count + 1) {
+        attempts += 1;
+        let k = rng.below(n);
+        let source = match (k, rng.uniform() < 0.5) {
+            (0, _) => 1,
+            (k, _) if k == n - 1 => k - 1,
+            (k, true) => k - 1,
+            (k, false) => k + 1,
+        };
+        if changes(k, source) < min_change.max(0.0).ln_1p()
+            || shifts.iter().any(|s| s.frame.abs_diff(k) < 3)
+        {
+            continue;
+        }
+        shifts.push(LogShift { frame: k, source });
+    }
+    shifts.sort_by_key(|s| s.frame);
+    for s in &shifts {
+        log[s.frame] = exposures_ms[s.source];
+    }
+    (log, shifts)
 }
 
 /// A synthetic benchmark sequence: everything but the encoded images, which are rendered on
@@ -172,6 +276,7 @@ impl SyntheticSequence {
             &PathConfig {
                 frames: config.frames,
                 fps: config.fps,
+                length: config.path_length,
                 ..PathConfig::default()
             },
         );
@@ -188,7 +293,7 @@ impl SyntheticSequence {
                     / 30.0
             })
             .collect();
-        SyntheticSequence {
+        let mut seq = SyntheticSequence {
             camera: FovCamera::dataset(config.width, config.height),
             path,
             room,
@@ -197,7 +302,51 @@ impl SyntheticSequence {
             vignette: ground_truth_vignette(config.width, config.height, seed),
             config,
             seed,
+        };
+        if config.exposure == ExposureMode::Auto {
+            seq.exposures_ms = seq.auto_exposures(&mut rng);
         }
+        seq
+    }
+
+    /// Mean expected signal per ms of exposure (U-units) of frame `i`, on a grid of rays.
+    fn brightness_per_ms(&self, i: usize) -> f64 {
+        let (w, h) = (self.config.width, self.config.height);
+        let r = self.path.rotations[i];
+        let origin = self.path.positions[i];
+        let (gx, gy) = (48, 36);
+        let (mut sum, mut n) = (0.0, 0usize);
+        for yi in 0..gy {
+            for xi in 0..gx {
+                let x = ((xi as f64 + 0.5) * w as f64 / gx as f64) as usize;
+                let y = ((yi as f64 + 0.5) * h as f64 / gy as f64) as usize;
+                if let Some(ray) = self.camera.unproject(x as f64, y as f64) {
+                    let rad = self.room.radiance(&origin, &(r * Vector3::from(ray)));
+                    sum += GAIN * self.vignette[y * w + x] as f64 * rad;
+                    n += 1;
+                }
+            }
+        }
+        sum / n.max(1) as f64
+    }
+
+    /// The exposures of [`ExposureMode::Auto`].
+    fn auto_exposures(&self, rng: &mut Rng) -> Vec<f64> {
+        let target = 0.4 * 255.0;
+        let (lo, hi) = (0.05f64, 30.0f64);
+        let n = self.config.frames;
+        let rates: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map(|i| self.brightness_per_ms(i).max(1e-6))
+            .collect();
+        let mut t = (target / rates[0]).clamp(lo, hi);
+        let mut out = Vec::with_capacity(n);
+        for rate in rates {
+            out.push(t);
+            let metered = t * rate * (0.04 * rng.normal()).exp();
+            t = (t * (target / metered).sqrt()).clamp(lo, hi);
+        }
+        out
     }
 
     /// Renders frame `i` as 8-bit grey, row-major, before compression (the sensor's

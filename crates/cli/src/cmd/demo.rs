@@ -166,6 +166,7 @@ pub fn run(args: &Args) -> Result<()> {
         size: ImageSize::new(640, 512),
         frames: 200,
         sensor: demo_sensor(false),
+        exposure: synth::SequenceExposureArgs::default(),
         force: false,
     };
     let truth_seq = synth::write_sequence(&seq_out, &seq_args)?;

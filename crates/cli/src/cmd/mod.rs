@@ -5,6 +5,7 @@ pub mod camera;
 pub mod demo;
 pub mod eval;
 pub mod eval_batch;
+pub mod exposure;
 pub mod info;
 pub mod plot;
 pub mod rectify;

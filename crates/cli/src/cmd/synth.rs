@@ -33,6 +33,15 @@ loses tracking more often, writes keyframes only and uses the 2e9 - t timestamps
     /// A benchmark-like sequence: zipped JPEG frames of a textured room seen through the
     /// dataset's FOV camera with vignette, non-gamma response, auto exposure and noise, plus
     /// times.txt, camera.txt, pcalib.txt, vignette.png and groundtruthSync.txt (the truth).
+    #[command(after_help = "\
+Example: a test set for `monovo exposure check` and `monovo exposure estimate`
+
+  monovo synth sequence -o seq --size 640x480 --frames 200 --exposure auto --length 8 \\
+      --shift-exposures 10 --seed 7
+  monovo exposure check seq --json
+
+truth_shifts.txt lists the frames whose logged exposure is a neighbour's, truth_times.txt the
+true exposures (written when times.txt differs from them).")]
     Sequence(SequenceArgs),
     /// A response-calibration sweep: a static scene at exposures from 0.05 to 20 ms (images.zip,
     /// times.txt with exposures, camera.txt), and the true pcalib.txt as truth_pcalib.txt.
@@ -183,9 +192,51 @@ pub struct SequenceArgs {
     pub frames: usize,
     #[command(flatten)]
     pub sensor: SensorArgs,
+    #[command(flatten)]
+    pub exposure: SequenceExposureArgs,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
+}
+
+/// The exposures of a synthetic sequence and how they are logged.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SequenceExposureArgs {
+    /// How the exposure changes: smooth (a slow wander between about 2 and 14 ms) or auto
+    /// (an auto-exposure controller following the scene's brightness, with metering noise:
+    /// a few percent from frame to frame).
+    #[arg(long, default_value = "smooth", value_name = "MODE")]
+    pub exposure: synthetic::scene::ExposureMode,
+    /// Length of the camera path in metres (the dataset's are about 100; walking at 1 m/s at
+    /// 25 fps is 0.04 per frame: --length 8 for 200 frames).
+    #[arg(long, default_value_t = 100.0, value_name = "M")]
+    pub length: f64,
+    /// Log this many exposures one frame off in times.txt, as the benchmark camera's
+    /// asynchronous SDK does (a frame logs its previous or next frame's exposure); the
+    /// frames, drawn from --seed, are listed in truth_shifts.txt and the true exposures are
+    /// in truth_times.txt.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub shift_exposures: usize,
+    /// Shifts go only where they change the logged exposure by at least this many percent
+    /// (a shift that changes nothing is no error).
+    #[arg(long, default_value_t = 2.0, value_name = "PERCENT")]
+    pub shift_min_change: f64,
+    /// Write times.txt without exposures (two columns), the truth in truth_times.txt: a
+    /// sequence for `monovo exposure estimate`.
+    #[arg(long)]
+    pub no_exposures: bool,
+}
+
+impl Default for SequenceExposureArgs {
+    fn default() -> Self {
+        SequenceExposureArgs {
+            exposure: synthetic::scene::ExposureMode::Smooth,
+            length: 100.0,
+            shift_exposures: 0,
+            shift_min_change: 2.0,
+            no_exposures: false,
+        }
+    }
 }
 
 /// Arguments of `monovo synth sweep`.
@@ -318,12 +369,30 @@ pub fn write_sequence(
     a: &SequenceArgs,
 ) -> Result<synthetic::scene::SyntheticSequence> {
     use synthetic::scene::{SequenceConfig, SyntheticSequence};
+    let e = &a.exposure;
+    if !(e.length.is_finite() && e.length > 0.0) {
+        anyhow::bail!(
+            "--length must be a positive number of metres, got {}",
+            e.length
+        );
+    }
+    if !(e.shift_min_change.is_finite() && e.shift_min_change >= 0.0) {
+        anyhow::bail!(
+            "--shift-min-change must be a percentage of at least 0, got {}",
+            e.shift_min_change
+        );
+    }
+    if e.shift_exposures > 0 && e.no_exposures {
+        anyhow::bail!("--shift-exposures needs logged exposures; leave out --no-exposures");
+    }
     let cfg = SequenceConfig {
         width: a.size.width,
         height: a.size.height,
         frames: a.frames.max(8),
         sensor: a.sensor.sensor(),
         response: a.sensor.response,
+        exposure: e.exposure,
+        path_length: e.length,
         ..SequenceConfig::default()
     };
     let seq = SyntheticSequence::new(a.seed, cfg);
@@ -331,12 +400,52 @@ pub fn write_sequence(
     write_frames(&out.file("images.zip")?, cfg.frames, a.sensor.ext(), |i| {
         a.sensor.encode(w, h, &seq.render(i))
     })?;
-    let times: String = seq
-        .times()
+    let rows = seq.times();
+    let truth: String = rows
         .iter()
         .map(|(id, t, e)| format!("{id} {t:.6} {e}\n"))
         .collect();
+    let (logged, shifts) = synthetic::scene::shift_exposure_log(
+        &seq.exposures_ms,
+        e.shift_exposures,
+        e.shift_min_change / 100.0,
+        a.seed,
+    );
+    if shifts.len() < e.shift_exposures {
+        eprintln!(
+            "monovo: warning: only {} of {} exposure shifts fit (isolated, changing the log by at least {}%)",
+            shifts.len(),
+            e.shift_exposures,
+            e.shift_min_change
+        );
+    }
+    let times: String = rows
+        .iter()
+        .zip(&logged)
+        .map(|((id, t, _), l)| {
+            if e.no_exposures {
+                format!("{id} {t:.6}\n")
+            } else {
+                format!("{id} {t:.6} {l}\n")
+            }
+        })
+        .collect();
     dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
+    if times != truth {
+        dataset_io::write_atomic(&out.file("truth_times.txt")?, truth.as_bytes())?;
+    }
+    if e.shift_exposures > 0 {
+        let mut text = String::from(
+            "# frame (0-based) whose logged exposure is another frame's: frame source true_ms logged_ms\n",
+        );
+        for s in &shifts {
+            text.push_str(&format!(
+                "{} {} {} {}\n",
+                s.frame, s.source, seq.exposures_ms[s.frame], logged[s.frame]
+            ));
+        }
+        dataset_io::write_atomic(&out.file("truth_shifts.txt")?, text.as_bytes())?;
+    }
     let out_size = ((w / 2).max(2), (h * 15 / 32).max(2));
     dataset_io::write_atomic(
         &out.file("camera.txt")?,
