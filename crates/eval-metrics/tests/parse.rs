@@ -124,3 +124,18 @@ fn byte_order_mark_crlf_double_blanks_and_decimal_commas() {
     let e = GroundTruth::parse("0 0 0 0 0 0 0 1\n1 0,5 0 0 0 0 0 1\n").unwrap_err();
     assert!(matches!(e, EvalError::DecimalComma { line: 2, .. }), "{e}");
 }
+
+#[test]
+fn zero_quaternions_and_singular_rotations_are_refused_with_the_line() {
+    let e = parse_tum("1 0 0 0 0 0 0 1\n2 1 0 0 0 0 0 0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 2, .. }), "{e}");
+    assert!(e.to_string().contains("not a rotation"));
+    let e = parse_euroc("1000000000000,0,0,0,0,0,0,0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 1, .. }), "{e}");
+    let e = parse_kitti("0 0 0 1 0 0 0 2 0 0 0 3\n", "0.0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 1, .. }), "{e}");
+    // NaN stays allowed: the run failed, it is not malformed
+    assert!(parse_tum("1 0 0 0 nan nan nan nan\n").is_ok());
+    // a non-unit quaternion is a rotation too
+    assert!(parse_tum("1 0 0 0 0 0 0 2\n").is_ok());
+}

@@ -66,6 +66,9 @@ pub enum PhotometricError {
     /// A bit depth outside 1..=16.
     #[error("bit depth {0} is not supported (1 to 16 bits per pixel)")]
     BitDepth(u32),
+    /// An output bit depth other than 8 or 16.
+    #[error("output depth {0} bits is not supported (8 or 16 bits per pixel)")]
+    OutputDepth(u8),
     /// A vignette that is zero everywhere or not finite.
     #[error("vignette: {0}")]
     Vignette(String),
