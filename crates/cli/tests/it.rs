@@ -5,4 +5,6 @@ mod calib;
 mod camera;
 mod common;
 mod eval;
+mod faults;
 mod rectify;
+mod terminal;

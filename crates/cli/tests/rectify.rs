@@ -266,7 +266,7 @@ fn photometric_without_vignette_corrects_the_response_alone() {
         "-o",
         out.to_str().unwrap(),
         "--photometric",
-        "--output",
+        "--pinhole",
         "none",
         "--size",
         "1280x1024",
@@ -385,4 +385,57 @@ fn sixteen_bit_frames_with_an_embedded_bit_depth() {
         "{e}"
     );
     assert!(!out.exists());
+}
+
+/// Every file of a folder, by relative path.
+fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The same rectification with 1 and with 2 threads writes bit-identical sequences.
+#[test]
+fn outputs_are_bit_identical_with_one_and_two_threads() {
+    let d = temp_dir("rectify_threads");
+    for (name, extra) in [
+        ("geometric", vec!["--zip"]),
+        ("photometric", vec!["--irradiance", "--reverse"]),
+    ] {
+        let mut outputs = Vec::new();
+        for threads in ["1", "2"] {
+            let out = d.join(format!("{name}{threads}"));
+            let mut args = vec![
+                "rectify",
+                fixture().to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            args.extend(&extra);
+            let o = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"))
+                .env("RAYON_NUM_THREADS", threads)
+                .args(&args)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            outputs.push(files_of(&out));
+        }
+        assert!(outputs[0].len() >= 3, "{name}");
+        assert!(
+            outputs[0] == outputs[1],
+            "{name}: outputs differ between 1 and 2 threads"
+        );
+    }
 }

@@ -178,24 +178,26 @@ fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
 
 /// Reads every frame of a sequence with its exposure; errors when exposures are missing.
 pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
-    if !seq.times().has_exposures() {
+    if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
-            "{}: calibration needs the exposure time of every frame (third column, > 0)",
+            "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); calibration needs the exposure time of every frame (third column, > 0)",
             seq.times_path().display()
         );
     }
     let idx = seq.indices(0..seq.len(), false);
-    let pb = progress::bar(idx.len() as u64, "decoding");
+    let pb = progress::bar(idx.len() as u64, "decoding", "frames");
     let mut frames = Vec::with_capacity(idx.len());
     let mut exposures = Vec::with_capacity(idx.len());
     seq.process(
         &idx,
         rayon::current_num_threads() * 4,
-        Ok::<_, anyhow::Error>,
+        |f| {
+            pb.inc(1);
+            Ok::<_, anyhow::Error>(f)
+        },
         |f| {
             exposures.push(f.exposure_ms.unwrap_or(0.0));
             frames.push(f.image);
-            pb.inc(1);
             Ok(())
         },
     )?;
@@ -241,7 +243,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;
-    let seq = Sequence::open(&a.sequence)?;
+    let seq = crate::cmd::open_sequence(&a.sequence)?;
     if seq.len() < 2 {
         bail!(
             "{}: response calibration needs at least 2 frames at different exposures, found {}",
@@ -252,7 +254,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     let (mut frames, exposures) = load_exposed_frames(&seq)?;
     let report = sweep_report(&frames, &exposures);
     if !a.json {
-        println!("{report}");
+        outln!("{report}")?;
     }
     let opts = ResponseOptions {
         max_iterations: a.max_iterations.max(1),
@@ -272,7 +274,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     .with_context(|| format!("{}", a.sequence.display()))?;
     pb.finish_and_clear();
     for w in &cal.warnings {
-        eprintln!("monovo: warning: {w}");
+        crate::warn(format_args!("{w}"));
     }
     dataset_io::write_atomic(&a.output, cal.response.to_text().as_bytes())?;
     let std_text = cal
@@ -287,7 +289,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     }
     let max_std = cal.std_error[..255].iter().copied().fold(0.0, f64::max);
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
@@ -311,9 +313,9 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "histogram": cal.histogram,
                 "warnings": cal.warnings,
             })
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "{} after {} iterations (last change {:.4} grey values); residual RMS {:.3} grey values",
             if cal.converged {
                 "converged"
@@ -323,19 +325,19 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
             cal.iterations,
             cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rmse
-        );
-        println!(
+        )?;
+        outln!(
             "noise: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2; observations used where the prediction is {:.0}..{:.0}",
             cal.noise.read, cal.noise.shot, cal.noise.adc, cal.censor_range.0, cal.censor_range.1
-        );
-        println!(
+        )?;
+        outln!(
             "U determined by the data for grey values {}..{}; {} value(s) continued by the prior; largest standard error {:.3} grey values",
             cal.observed_range.0,
             cal.observed_range.1,
             cal.filled.len(),
             max_std
-        );
-        println!("wrote {} and {}", a.output.display(), std_path.display());
+        )?;
+        outln!("wrote {} and {}", a.output.display(), std_path.display())?;
     }
     Ok(())
 }
@@ -615,20 +617,18 @@ fn plane_poses(
         .with_context(|| cam_path.display().to_string())?;
     let map = RectifyMap::new(&cam.input, cam.input_size, k_out, cam.output_size)?;
     let idx = seq.indices(0..seq.len(), false);
-    let pb = progress::bar(idx.len() as u64, "markers");
+    let pb = progress::bar(idx.len() as u64, "markers", "frames");
     let mut found: Vec<(usize, PoseFromMarker)> = Vec::new();
     seq.process(
         &idx,
         rayon::current_num_threads() * 4,
         |f| -> Result<(usize, PoseFromMarker)> {
-            Ok((
-                f.index,
-                photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?,
-            ))
+            let r = photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?;
+            pb.inc(1);
+            Ok((f.index, r))
         },
         |r| {
             found.push(r);
-            pb.inc(1);
             Ok(())
         },
     )?;
@@ -658,7 +658,7 @@ pub struct VignetteRun {
 
 /// Poses (from the marker or `--poses`) and the calibration, without writing anything.
 pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
-    let seq = Sequence::open(&a.sequence)?;
+    let seq = crate::cmd::open_sequence(&a.sequence)?;
     let cam_path = a.sequence.join("camera.txt");
     let Some(cam) = seq.camera() else {
         bail!(
@@ -674,9 +674,9 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
     })?;
     let response = photometric::InverseResponse::parse(&dataset_io::read_text(&pcalib_path)?)
         .with_context(|| pcalib_path.display().to_string())?;
-    if !seq.times().has_exposures() {
+    if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
-            "{}: vignette calibration needs the exposure time of every frame (third column, > 0)",
+            "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); vignette calibration needs the exposure time of every frame (third column, > 0)",
             seq.times_path().display()
         );
     }
@@ -691,7 +691,7 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
         );
     }
     if !a.json {
-        println!(
+        outln!(
             "{} of {} frames have a plane pose{}",
             frames.len(),
             seq.len(),
@@ -707,7 +707,7 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
                         .join(", ")
                 )
             }
-        );
+        )?;
     }
     let opts = photometric::VignetteOptions {
         max_iterations: a.max_iterations.max(1),
@@ -719,15 +719,20 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
     let decoded = if bytes <= DECODED_CACHE_BYTES {
         let idx: Vec<usize> = frames.iter().map(|f| f.0).collect();
         let mut out = Vec::with_capacity(idx.len());
+        let pb = progress::bar(idx.len() as u64, "decoding", "frames");
         seq.process(
             &idx,
             rayon::current_num_threads() * 4,
-            |f| Ok::<_, anyhow::Error>(f.image),
+            |f| {
+                pb.inc(1);
+                Ok::<_, anyhow::Error>(f.image)
+            },
             |img| {
                 out.push(img);
                 Ok(())
             },
         )?;
+        pb.finish_and_clear();
         out
     } else {
         Vec::new()
@@ -773,7 +778,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
     let VignetteRun { cal, used, skipped } = calibrate_vignette_sequence(a)?;
     let skipped_total: usize = skipped.values().sum();
     for w in &cal.warnings {
-        eprintln!("monovo: warning: {w}");
+        crate::warn(format_args!("{w}"));
     }
     let (w, h) = cal.vignette.size();
     let to16 = |values: &[f32], scale: f32| -> Vec<u16> {
@@ -857,7 +862,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         v.get(v.len() / 2).copied().unwrap_or(0.0)
     };
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
@@ -885,9 +890,9 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
                 "warnings": cal.warnings,
             })
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "{} after {} iterations (last change {:.4}%); relative residual RMS {:.4}; {} outliers dropped",
             if cal.converged {
                 "converged"
@@ -898,14 +903,14 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
             100.0 * cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rms_relative,
             cal.outliers
-        );
-        println!(
+        )?;
+        outln!(
             "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out",
             100.0 * cal.coverage,
             photometric::VignetteOptions::default().min_observations,
             cal.smoothing.defects
-        );
-        println!(
+        )?;
+        outln!(
             "smoothing of {}: {:.1} px ({}); median standard error {:.3}%",
             a.output.display(),
             cal.smoothing.sigma_px,
@@ -915,14 +920,14 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "given"
             },
             100.0 * sd_median
-        );
-        println!(
+        )?;
+        outln!(
             "wrote {}, {}, {} and {}",
             a.output.display(),
             raw_path.display(),
             std_path.display(),
             cov_path.display()
-        );
+        )?;
     }
     Ok(())
 }
