@@ -1,10 +1,13 @@
-//! Developer tasks of the monovo workspace: `cargo xtask bench-synthetic [--quick] [--json FILE]`.
+//! Developer tasks of the monovo workspace: `cargo xtask bench-synthetic [--quick] [--json FILE]`
+//! and `cargo xtask fuzz [--cases N] [--quick] [--target NAME]`.
 //!
 //! bench-synthetic runs every stage on synthetic data with known truth, prints accuracy
 //! against the truth and throughput / wall time / peak memory per stage, and fails when a
-//! figure is worse than the thresholds committed in `xtask/thresholds.json`.
+//! figure is worse than the thresholds committed in `xtask/thresholds.json`. fuzz feeds every
+//! parser arbitrary and mutated bytes and fails on a panic (see `fuzz.rs`).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod fuzz;
 mod response;
 mod stages;
 mod vignette;
@@ -39,10 +42,12 @@ impl Figure {
 }
 
 fn usage() -> &'static str {
-    "usage: cargo xtask bench-synthetic [--quick] [--only STAGE] [--json FILE]\n\n\
-     Runs every stage on synthetic data, prints accuracy, speed and memory, and fails when a\n\
-     figure is worse than xtask/thresholds.json. --quick is the CI variant (smaller data);\n\
-     --only runs one stage: camera, eval, rectify, response or vignette."
+    "usage: cargo xtask bench-synthetic [--quick] [--only STAGE] [--json FILE]\n       \
+     cargo xtask fuzz [--cases N] [--quick] [--seed S] [--target NAME] (see fuzz --help)\n\n\
+     bench-synthetic runs every stage on synthetic data, prints accuracy, speed and memory, and\n\
+     fails when a figure is worse than xtask/thresholds.json. --quick is the CI variant\n\
+     (smaller data); --only runs one stage: camera, eval, rectify, response or vignette.\n\
+     fuzz feeds every parser arbitrary and mutated bytes and fails on a panic."
 }
 
 fn main() -> ExitCode {
@@ -63,6 +68,9 @@ fn run() -> Result<()> {
     };
     if task == "response-study" {
         return response::study();
+    }
+    if task == "fuzz" {
+        return fuzz::run(args);
     }
     if task != "bench-synthetic" {
         bail!("unknown task `{task}`\n{}", usage());

@@ -71,13 +71,13 @@ pub fn run(
             .create(true)
             .append(true)
             .open(path)?;
-        for k in 0..256 {
+        for (k, uk) in u.iter().enumerate().take(256) {
             writeln!(
                 f,
                 "{} {} {} {} {}",
                 width * height * frames,
                 k,
-                u[k] - sweep.response[k],
+                uk - sweep.response[k],
                 cal.std_error[k],
                 sweep.response[k]
             )?;

@@ -333,8 +333,9 @@ fn messages_name_the_argument_once_and_no_line_zero() {
     assert!(stdout(&o).contains("--pinhole") && !stdout(&o).contains("--output-camera"));
 }
 
-/// The README's examples: `synth sequence` writes the dataset's 640x480 output camera, and
-/// `synth vignette` the poses file that `--poses` names.
+/// The README's examples: `synth sequence` writes the dataset's 640x480 output camera,
+/// `synth vignette` the poses file that `--poses` names, the camera flag is `--pinhole`, and
+/// every link (DESIGN.md included) points inside the repository.
 #[test]
 fn readme_examples_hold() {
     let d = temp_dir("faults_readme");
@@ -371,5 +372,28 @@ fn readme_examples_hold() {
     assert!(wall.join("poses.txt").is_file());
     let readme = std::fs::read_to_string(repo_file("README.md")).unwrap();
     assert!(readme.contains("--poses wall/poses.txt"));
-    assert!(!readme.contains("../shared") && !readme.contains("DESIGN.md"));
+    // the output camera is --pinhole in the examples (--output is the output path)
+    assert!(
+        !readme.contains("--output full") && !readme.contains("--output \""),
+        "README"
+    );
+    // every link and image of the README points to a file of the repository
+    let mut links = 0;
+    for (i, _) in readme.match_indices("](") {
+        let target = &readme[i + 2..];
+        let target = &target[..target.find(')').unwrap()];
+        if target.starts_with("http") {
+            continue;
+        }
+        links += 1;
+        assert!(!target.contains(".."), "{target} leaves the repository");
+        assert!(
+            std::path::Path::new(&repo_file(target)).is_file(),
+            "{target} is not a file of the repository"
+        );
+    }
+    assert!(
+        links >= 8 && readme.contains("](docs/DESIGN.md)"),
+        "{links}"
+    );
 }

@@ -1,5 +1,5 @@
 //! `monovo info` and `monovo rectify` on a generated 1280x1024 zipped JPEG sequence.
-use crate::common::{monovo, stderr, stdout, temp_dir};
+use crate::common::{files_of, monovo, stderr, stdout, temp_dir};
 use camera_model::{CameraFile, RectifyMap};
 use dataset_io::Sequence;
 use std::path::{Path, PathBuf};
@@ -388,24 +388,6 @@ fn sixteen_bit_frames_with_an_embedded_bit_depth() {
 }
 
 /// Every file of a folder, by relative path.
-fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
-                out.push((rel, std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    out.sort();
-    out
-}
-
 /// The same rectification with 1 and with 2 threads writes bit-identical sequences.
 #[test]
 fn outputs_are_bit_identical_with_one_and_two_threads() {

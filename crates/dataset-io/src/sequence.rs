@@ -118,6 +118,19 @@ fn decode_jpeg_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
     let (w, h) = d
         .dimensions()
         .ok_or_else(|| "corrupt JPEG: no frame header".to_string())?;
+    // Every 8x8 block of a Huffman-coded scan takes at least one bit (the code of its DC
+    // difference), and zune-jpeg has no arithmetic decoding. A frame that declares more blocks
+    // than the file has bits ended its scan early (an end-of-image marker where data should
+    // be), which the decoder accepts even in strict mode and would fill, for a few hundred
+    // bytes, as a mostly empty image of up to 16384x16384 pixels.
+    let blocks = w.div_ceil(8).saturating_mul(h.div_ceil(8));
+    if bytes.len().saturating_mul(8) < blocks {
+        return Err(format!(
+            "corrupt JPEG: a {w}x{h} frame needs at least {} bytes of data, the file has {}",
+            blocks.div_ceil(8),
+            bytes.len()
+        ));
+    }
     let data = d.decode().map_err(|e| format!("corrupt JPEG: {e:?}"))?;
     if data.len() != w * h {
         return Err(format!(

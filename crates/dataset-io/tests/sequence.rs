@@ -347,6 +347,32 @@ fn a_corrupt_zip_entry_size_is_not_trusted() {
     }
 }
 
+/// A JPEG whose frame header declares far more 8x8 blocks than its scan can hold (the scan
+/// ends early at an end-of-image marker) is corrupt, not a large empty image.
+#[test]
+fn a_jpeg_too_short_for_its_size_is_corrupt() {
+    let good = encode_jpeg_gray(16, 16, &pattern(0, 16, 16), 90).unwrap();
+    assert_eq!(
+        dataset_io::decode_gray8(&good).unwrap().width(),
+        16,
+        "the unchanged frame decodes"
+    );
+    // the frame header (SOF0: FF C0, length, precision, height, width): 12336x2305
+    let sof = good.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+    let mut big = good.clone();
+    big[sof + 5..sof + 9].copy_from_slice(&[0x30, 0x30, 0x09, 0x01]);
+    for decode in [
+        |b: &[u8]| dataset_io::decode_gray8(b).map(|_| ()),
+        |b: &[u8]| dataset_io::decode_gray(b).map(|_| ()),
+    ] {
+        let e = decode(&big).unwrap_err();
+        assert!(
+            e.contains("corrupt JPEG") && e.contains("2305x12336"),
+            "{e}"
+        );
+    }
+}
+
 #[test]
 fn encoders_refuse_a_buffer_of_the_wrong_length() {
     use dataset_io::{encode_jpeg_gray, encode_png_u16, encode_png_u8, PngSpeed};

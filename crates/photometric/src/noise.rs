@@ -82,7 +82,7 @@ pub(crate) fn fit_noise(u: &[f64; LEVELS], rss: &[f64], cnt: &[f64]) -> Option<N
         let Some(sol) = ata.cholesky().map(|c| c.solve(&atb)) else {
             continue;
         };
-        if sol.iter().any(|&x| !(x >= 0.0) || !x.is_finite()) {
+        if sol.iter().any(|&x| !x.is_finite() || x < 0.0) {
             continue;
         }
         let mut coef = [0.0; 3];

@@ -656,7 +656,7 @@ fn solve_u_step(
     let (mut a, b) = u_system(u, sums, penalty, lambda);
     // Levenberg-Marquardt: damping relative to each value's information from the data
     for k in 0..LEVELS {
-        if !(k == GAUGE && !sums.hess.is_empty()) {
+        if k != GAUGE || sums.hess.is_empty() {
             a[(k, k)] += damping * sums.diag[k];
         }
     }
@@ -794,8 +794,8 @@ fn extrapolate_with(
             }
         } else {
             let slope = (u[last] - u[first]) / (last - first).max(1) as f64;
-            for k in last + 1..LEVELS {
-                out[k] = u[last] + slope.max(1e-9) * (k - last) as f64;
+            for (k, o) in out.iter_mut().enumerate().take(LEVELS).skip(last + 1) {
+                *o = u[last] + slope.max(1e-9) * (k - last) as f64;
             }
         }
     }

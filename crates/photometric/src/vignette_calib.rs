@@ -375,14 +375,38 @@ fn variance_table(u: &[f64; 256], noise: &NoiseModel) -> (Vec<f64>, f64) {
     (table, scale)
 }
 
-/// Frames per parallel job: consecutive frames share their accumulators.
+/// Parallel jobs of a pass over the frames: consecutive frames share their accumulators.
+const FRAME_JOBS: usize = 8;
+
+/// The frames of each job: a partition of the frames that does not depend on the number of
+/// threads, so that every sum is taken in the same order with any number of threads.
 fn frame_jobs(n: usize) -> Vec<std::ops::Range<usize>> {
-    let jobs = rayon::current_num_threads().clamp(1, n.max(1));
+    let jobs = FRAME_JOBS.clamp(1, n.max(1));
     let per = n.div_ceil(jobs);
     (0..jobs)
         .map(|j| (j * per).min(n)..((j + 1) * per).min(n))
         .filter(|r| !r.is_empty())
         .collect()
+}
+
+/// Runs `job` on the frames of every job of [`frame_jobs`], as many at a time as there are
+/// threads, and hands the results to `add` in the order of the jobs: the same bits with one
+/// thread or many, and at most one job's accumulators per thread in memory.
+fn fold_frame_jobs<T: Send>(
+    n: usize,
+    job: impl Fn(std::ops::Range<usize>) -> Result<T, PhotometricError> + Sync,
+    mut add: impl FnMut(T),
+) -> Result<(), PhotometricError> {
+    let jobs = frame_jobs(n);
+    let wave = rayon::current_num_threads().max(1);
+    for chunk in jobs.chunks(wave) {
+        let parts: Vec<T> = chunk
+            .par_iter()
+            .map(|range| job(range.clone()))
+            .collect::<Result<_, _>>()?;
+        parts.into_iter().for_each(&mut add);
+    }
+    Ok(())
 }
 
 /// The C step. As the paper (`jacobi = false`): each cell's irradiance is the weighted
@@ -399,9 +423,11 @@ fn c_step(
     let ncell = cells(p.grid);
     let reg = p.options.registration_px;
     let grid = p.grid;
-    let parts: Vec<(Vec<f32>, Vec<f32>)> = frame_jobs(p.frames.len())
-        .into_par_iter()
-        .map(|range| -> Result<(Vec<f32>, Vec<f32>), PhotometricError> {
+    let mut num_total = vec![0.0f64; ncell];
+    let mut den_total = vec![0.0f64; ncell];
+    fold_frame_jobs(
+        p.frames.len(),
+        |range| -> Result<(Vec<f32>, Vec<f32>), PhotometricError> {
             let mut num = vec![0.0f32; ncell];
             let mut den = vec![0.0f32; ncell];
             for i in range {
@@ -425,7 +451,7 @@ fn c_step(
                     ];
                     let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
                     let tv = t * model.v[px];
-                    if !(tv > 0.0) {
+                    if tv.is_nan() || tv <= 0.0 {
                         continue;
                     }
                     let obs = p.u[k as usize];
@@ -447,18 +473,21 @@ fn c_step(
                 }
             }
             Ok((num, den))
-        })
-        .collect::<Result<_, _>>()?;
+        },
+        |(num, den)| {
+            for (t, v) in num_total.iter_mut().zip(&num) {
+                *t += *v as f64;
+            }
+            for (t, v) in den_total.iter_mut().zip(&den) {
+                *t += *v as f64;
+            }
+        },
+    )?;
     let mut c = model.c.clone();
-    for j in 0..ncell {
-        let (mut nu, mut de) = (0.0f64, 0.0f64);
-        for part in &parts {
-            nu += part.0[j] as f64;
-            de += part.1[j] as f64;
-        }
-        if de > 0.0 {
-            let base = if jacobi { c[j] as f64 } else { 0.0 };
-            c[j] = (base + nu / de).max(0.0) as f32;
+    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
+        if *de > 0.0 {
+            let base = if jacobi { *cj as f64 } else { 0.0 };
+            *cj = (base + nu / de).max(0.0) as f32;
         }
     }
     Ok(c)
@@ -474,9 +503,10 @@ fn v_step(
     let npx = p.rays.len();
     let reg = p.options.registration_px;
     let u = &p.u;
-    let parts: Vec<VSums> = frame_jobs(p.frames.len())
-        .into_par_iter()
-        .map(|range| -> Result<VSums, PhotometricError> {
+    let mut total = VSums::new(npx);
+    fold_frame_jobs(
+        p.frames.len(),
+        |range| -> Result<VSums, PhotometricError> {
             let mut acc = VSums::new(npx);
             for i in range {
                 let Some(pf) = p.prepare(i)? else {
@@ -502,7 +532,7 @@ fn v_step(
                         model.c[idx[3]] as f64,
                     ];
                     let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
-                    if !(cq > 0.0) {
+                    if cq.is_nan() || cq <= 0.0 {
                         continue;
                     }
                     let tc = t * cq;
@@ -538,12 +568,9 @@ fn v_step(
                 }
             }
             Ok(acc)
-        })
-        .collect::<Result<_, _>>()?;
-    let mut total = VSums::new(npx);
-    for part in &parts {
-        total.add(part);
-    }
+        },
+        |part| total.add(&part),
+    )?;
     Ok(total)
 }
 
@@ -812,9 +839,9 @@ pub fn calibrate_vignette(
             ));
         }
         let mut gv = model.v.clone();
-        for p in 0..npx {
+        for (p, g) in gv.iter_mut().enumerate().take(npx) {
             if vs.den[p] > 0.0 {
-                gv[p] = vs.num[p] / vs.den[p];
+                *g = vs.num[p] / vs.den[p];
             }
         }
         // the gauge: mean V over observed pixels = 1 (C absorbs the scale)
@@ -1011,7 +1038,7 @@ fn finish(
         .copied()
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
-    if !(max > 0.0) {
+    if max.is_nan() || max <= 0.0 {
         return Err(PhotometricError::Calibration(
             "the smoothed vignette is zero everywhere; the data do not determine V".into(),
         ));
@@ -1105,7 +1132,7 @@ fn fitted_peak(w: usize, h: usize, map: &[f64], sd: &[f64], sigma_px: f64) -> Op
         for x in x0..=x1 {
             let (dx, dy) = ((x as f64 - cx) / r, (y as f64 - cy) / r);
             let i = y * w + x;
-            if dx * dx + dy * dy > 1.0 || !map[i].is_finite() || !(sd[i] > 0.0) {
+            if dx * dx + dy * dy > 1.0 || !map[i].is_finite() || sd[i].is_nan() || sd[i] <= 0.0 {
                 continue;
             }
             let f = nalgebra::SVector::<f64, 6>::from([1.0, dx, dy, dx * dx, dx * dy, dy * dy]);

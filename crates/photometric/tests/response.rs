@@ -113,10 +113,10 @@ fn standard_errors_cover_the_true_errors() {
         let u = cal.response.values();
         assert_eq!(cal.std_error.len(), 256);
         assert_eq!(cal.std_error[255], 0.0);
-        for k in 0..255 {
+        for (k, uk) in u.iter().enumerate().take(255) {
             assert!(cal.std_error[k] > 0.0 && cal.std_error[k].is_finite());
             total += 1;
-            if (u[k] - s.response[k]).abs() <= 2.0 * cal.std_error[k] {
+            if (uk - s.response[k]).abs() <= 2.0 * cal.std_error[k] {
                 inside += 1;
             }
         }

@@ -577,15 +577,19 @@ pub fn vignette_figure(
     plot::save(&fig, path)
 }
 
+/// The frames with a plane pose (index, exposure, pose) and the count of frames skipped
+/// for each reason.
+type PlanePoses = (
+    Vec<(usize, f64, photometric::PlanePose)>,
+    std::collections::BTreeMap<&'static str, usize>,
+);
+
 /// The plane pose of every frame: from a poses file, or from the marker.
 fn plane_poses(
     a: &VignetteArgs,
     seq: &Sequence,
     cam: &camera_model::CameraFile,
-) -> Result<(
-    Vec<(usize, f64, photometric::PlanePose)>,
-    std::collections::BTreeMap<&'static str, usize>,
-)> {
+) -> Result<PlanePoses> {
     use camera_model::{output_intrinsics, OutputMode, RectifyMap};
     use photometric::marker::PoseFromMarker;
     let rows = &seq.times().rows;
