@@ -63,9 +63,9 @@ pub struct ResponseOptions {
     /// Stop when the largest change of `U` (scaled to `U(255) = 255`) between two iterations
     /// is below this many grey levels.
     pub tolerance: f64,
-    /// Strength of the third-difference prior, relative to the strength the exposure steps
-    /// call for (see the module documentation); 0 leaves the data's blind directions to the
-    /// iteration.
+    /// The smallest scale, in grey values, over which the third-difference prior smooths
+    /// `U` (it smooths over more where the exposure steps leave longer ripples undetermined;
+    /// see the module documentation). Smaller values leave more to the data.
     pub smoothness: f64,
     /// Radius (pixels) of the neighbourhood dropped around saturated pixels.
     pub saturation_border: usize,
