@@ -786,14 +786,16 @@ fn every_trajectory_parses() {
             ));
         }
         for (pose, row) in traj.poses.iter().zip(&data) {
-            let q = pose.orientation;
-            let norm = (q.iter().map(|v| v * v).sum::<f64>()).sqrt();
+            let norm = pose.orientation.norm();
             let pos = if width == 8 {
                 [row[1], row[2], row[3]]
             } else {
                 [row[3], row[7], row[11]]
             };
-            if pose.position != pos || (norm - 1.0).abs() > 1e-3 || !pose.is_finite() {
+            if pose.position != eval_metrics::nalgebra::Vector3::from(pos)
+                || (norm - 1.0).abs() > 1e-3
+                || !pose.is_finite()
+            {
                 failures.push(format!("{file}: pose {pose:?} vs line {row:?}"));
                 break;
             }

@@ -10,7 +10,7 @@
 //! swapped, splices of two seeds, PNG chunks whose CRC is made valid again) of seeds: the
 //! real files under `tests/fixtures/dso-family/` (their first few KiB) and small generated
 //! files (a sequence's times.txt and images.zip, PNG and JPEG frames of every kind, poses,
-//! results.csv). The workspace has no TOML configuration files to parse.
+//! results.csv; the calibration config `data/calib.toml`).
 //!
 //! What a case exercises beyond the parser: what the command-line tools do next with a
 //! parsed value (camera.txt: the output pinhole and the rectification map, on about one case
@@ -102,7 +102,7 @@ fn estimate() -> Option<&'static eval_metrics::Trajectory> {
 
 /// Cases of camera.txt that also compute the output pinhole and the rectification map: about
 /// one in this many (DSO's crop search alone samples 200000 points: about a millisecond).
-const CAMERA_GEOMETRY_EVERY: usize = 4;
+const CAMERA_GEOMETRY_EVERY: u64 = 4;
 
 /// The largest sides the camera geometry is computed at; larger files are scaled down (the
 /// model with them), which keeps a case at milliseconds and its memory small.
@@ -147,17 +147,19 @@ fn camera_geometry(f: &camera_model::CameraFile) {
     }
 }
 
+/// FNV-1a of an input: picks the cases that also run something expensive.
+fn input_hash(b: &[u8]) -> u64 {
+    fnv1a(b)
+}
+
 fn run_camera(b: &[u8]) -> bool {
     let Ok(f) = camera_model::CameraFile::parse(&text(b)) else {
         return false;
     };
     let _ = camera_model::output_notes(&f.input, f.input_size, &f.output, f.output_size);
     let _ = camera_model::CameraFile::parse(&f.to_text());
-    // the case number is not known here: a cheap hash of the input picks the cases
-    let hash = b
-        .iter()
-        .fold(0usize, |h, &c| h.wrapping_mul(31).wrapping_add(c as usize));
-    if hash % CAMERA_GEOMETRY_EVERY == 0 {
+    // the case number is not known here: a hash of the input picks the cases
+    if input_hash(b).is_multiple_of(CAMERA_GEOMETRY_EVERY) {
         camera_geometry(&f);
     }
     true
@@ -272,6 +274,60 @@ fn run_jpeg(b: &[u8]) -> bool {
     let grey = dataset_io::decode_gray8(b).is_ok();
     let _ = dataset_io::decode_gray(b);
     grey
+}
+
+/// `monovo calib --config FILE` as the command reads it (`CalibConfig` in
+/// crates/cli/src/cmd/calib.rs, a binary crate): a `[response]` and a `[vignette]` table of
+/// the library's option types, unknown keys refused.
+#[derive(Default, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct CalibConfig {
+    response: photometric::ResponseOptions,
+    vignette: photometric::VignetteOptions,
+}
+
+/// A tiny exposure sweep (32x24, 8 exposures) for the response options of a fuzzed config.
+fn tiny_sweep() -> &'static (Vec<camera_model::Image<u8>>, Vec<f64>) {
+    static SWEEP: std::sync::OnceLock<(Vec<camera_model::Image<u8>>, Vec<f64>)> =
+        std::sync::OnceLock::new();
+    SWEEP.get_or_init(|| {
+        let s = synthetic::scene::Sweep::new(
+            4,
+            synthetic::scene::SweepConfig {
+                width: 32,
+                height: 24,
+                frames: 8,
+                factor: 2.0,
+                t0: 0.5,
+                ..synthetic::scene::SweepConfig::default()
+            },
+        );
+        let frames = (0..8)
+            .filter_map(|i| camera_model::Image::new(32, 24, s.render(i)).ok())
+            .collect();
+        (frames, s.exposures_ms.clone())
+    })
+}
+
+/// Cases of the calibration config whose response options, when valid, also calibrate the
+/// tiny sweep: about one in this many (picked by a hash of the input).
+const CONFIG_CALIBRATION_EVERY: u64 = 256;
+
+fn run_calib_config(b: &[u8]) -> bool {
+    let Ok(c) = toml::from_str::<CalibConfig>(&text(b)) else {
+        return false;
+    };
+    let _ = c.vignette.check();
+    // a valid iteration limit may still be 100000 passes: the tiny run keeps to 200
+    if c.response.check().is_ok()
+        && c.response.max_iterations <= 200
+        && input_hash(b).is_multiple_of(CONFIG_CALIBRATION_EVERY)
+    {
+        let (frames, exposures) = tiny_sweep();
+        let mut frames = frames.clone();
+        let _ = photometric::calibrate_response(&mut frames, exposures, &c.response, &|_, _| {});
+    }
+    true
 }
 
 /// The first `limit` bytes of a seed, cut at a line end for text.
@@ -414,17 +470,44 @@ fn text_seeds_generated() -> (Vec<u8>, Vec<u8>, Vec<u8>, Vec<u8>) {
             i * 2
         ));
     }
-    // results.csv
-    let mut csv = String::from(eval_metrics::CSV_HEADER);
-    csv.push('\n');
-    for (i, status) in ["ok", "failed", "ok", "ok"].iter().enumerate() {
-        csv.push_str(&format!(
-            "dso,sequence_{:02},{},{i},{status},0.5,1.01,0.3,0.2,0.1,0.01,0.01,100\n",
-            i % 2 + 1,
-            if i % 2 == 0 { "fwd" } else { "bwd" }
-        ));
-    }
-    csv.push_str("\"a,b\",sequence_01,bwd,0,failed,inf,inf,inf,inf,inf,inf,inf,0\n");
+    // results.csv, as eval-batch writes it
+    let records: Vec<eval_metrics::RunRecord> = (0..6u32)
+        .map(|i| {
+            let failed = i % 3 == 1;
+            eval_metrics::RunRecord {
+                key: eval_metrics::RunKey {
+                    method: if i == 5 {
+                        "a,b \"c\"".into()
+                    } else {
+                        "dso".into()
+                    },
+                    sequence: format!("sequence_{:02}", i % 2 + 1),
+                    direction: if i % 2 == 0 {
+                        eval_metrics::Direction::Forward
+                    } else {
+                        eval_metrics::Direction::Backward
+                    },
+                    run: i,
+                },
+                failure: failed.then(|| "lost, before the end segment".to_string()),
+                metrics: if failed {
+                    eval_metrics::Metrics::FAILED
+                } else {
+                    eval_metrics::Metrics {
+                        e_align: 0.5 + f64::from(i),
+                        e_s: 1.01,
+                        e_r: 0.3,
+                        e_t: 0.2,
+                        e_rmse: 0.1,
+                        rmse_start: 0.01,
+                        rmse_end: 0.02,
+                    }
+                },
+                poses: 100,
+            }
+        })
+        .collect();
+    let csv = eval_metrics::write_csv(&records);
     // poses of a vignette-calibration set
     let plane = synthetic::plane::PlaneSequence::new(
         3,
@@ -571,6 +654,23 @@ fn targets(root: &Path) -> Result<Vec<Target>> {
             seeds: vec![poses],
             text: true,
             run: run_plane_poses,
+        },
+        Target {
+            id: "calib-config",
+            what: "calib --config TOML",
+            seeds: {
+                let full =
+                    std::fs::read(root.join("data/calib.toml")).context("data/calib.toml")?;
+                vec![
+                    full,
+                    b"[vignette]\nsmoothing_px = 2.0\ngrid = 200\n".to_vec(),
+                    b"[response]\nmax_iterations = 20\ntolerance = 0.1\nsaturation_border = 0\n"
+                        .to_vec(),
+                    b"response = { smoothness = 3.0, censor_sigmas = 2.5 }\n".to_vec(),
+                ]
+            },
+            text: true,
+            run: run_calib_config,
         },
         Target {
             id: "results-csv",
@@ -924,7 +1024,12 @@ fn options(mut args: impl Iterator<Item = String>) -> Result<Option<Options>> {
 
 /// A stable number for a target's name: its cases do not change when targets are added.
 fn name_hash(id: &str) -> u64 {
-    id.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, c| {
+    fnv1a(id.as_bytes())
+}
+
+/// FNV-1a, 64 bits.
+fn fnv1a(b: &[u8]) -> u64 {
+    b.iter().fold(0xCBF2_9CE4_8422_2325u64, |h, &c| {
         (h ^ c as u64).wrapping_mul(0x0000_0100_0000_01B3)
     })
 }

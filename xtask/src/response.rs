@@ -65,33 +65,6 @@ pub fn run(
     let u = cal.response.values();
     let (max, rms) = cal.response.errors_against(&sweep.response);
     let increasing = (1..256).all(|k| u[k] > u[k - 1]);
-    if let Ok(path) = std::env::var("MONOVO_DUMP") {
-        use std::io::Write;
-        let mut f = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(path)?;
-        for (k, uk) in u.iter().enumerate().take(256) {
-            writeln!(
-                f,
-                "{} {} {} {} {}",
-                width * height * frames,
-                k,
-                uk - sweep.response[k],
-                cal.std_error[k],
-                sweep.response[k]
-            )?;
-        }
-    }
-    if std::env::var_os("MONOVO_DEBUG_ERR").is_some() {
-        for k in (0..256).step_by(8) {
-            eprintln!(
-                "    k {k:3} err {:+.4} std {:.4}",
-                u[k] - sweep.response[k],
-                cal.std_error.get(k).copied().unwrap_or(f64::NAN)
-            );
-        }
-    }
     let within = (0..255)
         .filter(|&k| cal.std_error.get(k).is_some_and(|s| *s > 0.0))
         .fold((0, 0), |(a, n), k| {
@@ -125,9 +98,6 @@ fn configs(quick: bool) -> Vec<(String, Sensor)> {
     ));
     if quick {
         v.retain(|(n, _)| n == "low" || n == "high_jpeg");
-    }
-    if let Ok(only) = std::env::var("MONOVO_ONLY_CFG") {
-        v.retain(|(n, _)| *n == only);
     }
     v
 }
@@ -215,132 +185,6 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
 /// `cargo xtask response-study`: the response calibration over curves, noise levels and sweep
 /// lengths (a grid for choosing defaults; prints one line per run and the worst errors).
 pub fn study() -> Result<()> {
-    if let Ok(seeds) = std::env::var("MONOVO_SEEDS") {
-        let n: u64 = seeds.parse()?;
-        let level: NoiseLevel = std::env::var("MONOVO_LEVEL")
-            .unwrap_or("high".into())
-            .parse()
-            .map_err(anyhow::Error::msg)?;
-        let q: u8 = std::env::var("MONOVO_Q")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(90);
-        let mut sensor = if q > 100 {
-            Sensor::preset(level)
-        } else {
-            Sensor::preset(level).with_jpeg(q)
-        };
-        if let Some(v) = std::env::var("MONOVO_FW").ok().and_then(|v| v.parse().ok()) {
-            sensor.full_well = v;
-        }
-        if let Some(v) = std::env::var("MONOVO_ADC")
-            .ok()
-            .and_then(|v| v.parse().ok())
-        {
-            sensor.adc_noise = v;
-        }
-        if let Some(v) = std::env::var("MONOVO_READ")
-            .ok()
-            .and_then(|v| v.parse().ok())
-        {
-            sensor.read_noise = v;
-        }
-        sensor.hot_pixels = 0.0;
-        sensor.dead_pixels = 0.0;
-        let curve: ResponseCurve = std::env::var("MONOVO_CURVE")
-            .unwrap_or("dataset".into())
-            .parse()
-            .map_err(anyhow::Error::msg)?;
-        let opts = photometric::ResponseOptions::default();
-        let nf: usize = std::env::var("MONOVO_FRAMES")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(30);
-        for seed in 0..n {
-            let factor = (20.0f64 / 0.05).powf(1.0 / (nf - 1) as f64);
-            let sweep = Sweep::new(
-                seed + 100,
-                SweepConfig {
-                    width: 320,
-                    height: 256,
-                    frames: nf,
-                    t0: 0.05,
-                    factor,
-                    sensor,
-                    response: curve,
-                },
-            );
-            let mut imgs: Vec<Image<u8>> = (0..nf)
-                .map(|i| Ok(Image::new(320, 256, sweep.frame(i)?)?))
-                .collect::<Result<_>>()?;
-            if std::env::var_os("MONOVO_ORACLE").is_some() {
-                let mut sum = vec![0.0f64; 256];
-                let mut cnt = vec![0.0f64; 256];
-                for (i, f) in imgs.iter().enumerate() {
-                    let t = sweep.exposures_ms[i];
-                    for (p, &k) in f.data().iter().enumerate() {
-                        let e = t * sweep.irradiance[p];
-                        let g = synthetic::camera::response_value(&sweep.response, e);
-                        if g < 250.0 && k < 255 {
-                            let b = g.round() as usize;
-                            sum[b] += k as f64 - g;
-                            cnt[b] += 1.0;
-                        }
-                    }
-                }
-                for b in [100usize, 200, 220, 230, 235, 240, 243, 246, 248] {
-                    eprintln!(
-                        "  oracle G={b}: mean(I - G(e)) = {:+.4} over {}",
-                        sum[b] / cnt[b].max(1.0),
-                        cnt[b]
-                    );
-                }
-            }
-            let cal =
-                photometric::calibrate_response(&mut imgs, &sweep.exposures_ms, &opts, &|_, _| {})?;
-            let mut u = *cal.response.values();
-            if std::env::var_os("MONOVO_JACK").is_some() {
-                let mut halves = Vec::new();
-                for par in 0..2 {
-                    let mut fr: Vec<Image<u8>> = imgs
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % 2 == par)
-                        .map(|(_, f)| f.clone())
-                        .collect();
-                    let ex: Vec<f64> = sweep
-                        .exposures_ms
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % 2 == par)
-                        .map(|(_, e)| *e)
-                        .collect();
-                    halves.push(
-                        *photometric::calibrate_response(&mut fr, &ex, &opts, &|_, _| {})?
-                            .response
-                            .values(),
-                    );
-                }
-                for k in 0..256 {
-                    u[k] = 2.0 * u[k] - 0.5 * (halves[0][k] + halves[1][k]);
-                }
-            }
-            let g = sweep.response[128] / u[128];
-            eprintln!(
-                "censor {:?} observed {:?}",
-                cal.censor_range, cal.observed_range
-            );
-            let line: Vec<String> = [
-                8usize, 32, 64, 96, 160, 192, 200, 208, 216, 224, 228, 232, 236, 240, 244, 248,
-                252, 255,
-            ]
-            .iter()
-            .map(|&k| format!("{k}:{:+.3}%", 100.0 * (u[k] * g / sweep.response[k] - 1.0)))
-            .collect();
-            println!("seed {seed}: {}", line.join(" "));
-        }
-        return Ok(());
-    }
     let opts = photometric::ResponseOptions::default();
     let all = [
         ResponseCurve::Dataset,
@@ -348,10 +192,7 @@ pub fn study() -> Result<()> {
         ResponseCurve::Log,
         ResponseCurve::Knee,
     ];
-    let curves: Vec<ResponseCurve> = match std::env::var("MONOVO_CURVE") {
-        Ok(c) => vec![c.parse().map_err(anyhow::Error::msg)?],
-        Err(_) => all.to_vec(),
-    };
+    let curves: Vec<ResponseCurve> = all.to_vec();
     let sensors = [
         ("typical", Sensor::preset(NoiseLevel::Typical)),
         ("high_jpeg", Sensor::preset(NoiseLevel::High).with_jpeg(90)),

@@ -117,84 +117,6 @@ pub fn run(
     let seconds = t0.elapsed().as_secs_f64();
     let (rms, _) = photometric::vignette_errors(cal.vignette.data(), &truth);
     let (raw_rms, valid) = photometric::vignette_errors(cal.raw.data(), &truth);
-    if std::env::var_os("MONOVO_DEBUG").is_some() {
-        let est = cal.vignette.data();
-        let num: f64 = est
-            .iter()
-            .zip(&truth)
-            .map(|(e, t)| (*e as f64) * (*t as f64))
-            .sum();
-        let den: f64 = est.iter().map(|e| (*e as f64).powi(2)).sum();
-        let sc = num / den;
-        let r = (est
-            .iter()
-            .zip(&truth)
-            .map(|(e, t)| ((sc * *e as f64 - *t as f64) / *t as f64).powi(2))
-            .sum::<f64>()
-            / est.len() as f64)
-            .sqrt();
-        eprintln!(
-            "best scale {sc:.4}: rms {:.3}%; smoothing {:?}",
-            100.0 * r,
-            cal.smoothing
-        );
-        let am = (0..est.len())
-            .max_by(|&a, &b| est[a].total_cmp(&est[b]))
-            .unwrap_or(0);
-        let tm = (0..est.len())
-            .max_by(|&a, &b| truth[a].total_cmp(&truth[b]))
-            .unwrap_or(0);
-        if let Ok(dir) = std::env::var("MONOVO_DUMP_DIR") {
-            let ratio: Vec<u8> = est
-                .iter()
-                .zip(&truth)
-                .map(|(e, t)| ((e / t - 1.0) * 2000.0 + 128.0).clamp(0.0, 255.0) as u8)
-                .collect();
-            dataset_io::write_png_u8(
-                std::path::Path::new(&format!("{dir}/ratio.png")),
-                w,
-                h,
-                1,
-                &ratio,
-                dataset_io::PngSpeed::Fast,
-            )?;
-            let raw = cal.raw.data();
-            let ratio: Vec<u8> = raw
-                .iter()
-                .zip(&truth)
-                .map(|(e, t)| {
-                    if e.is_finite() {
-                        ((e / t - 1.0) * 500.0 + 128.0).clamp(0.0, 255.0) as u8
-                    } else {
-                        0
-                    }
-                })
-                .collect();
-            dataset_io::write_png_u8(
-                std::path::Path::new(&format!("{dir}/raw_ratio.png")),
-                w,
-                h,
-                1,
-                &ratio,
-                dataset_io::PngSpeed::Fast,
-            )?;
-            let cnt: Vec<u8> = cal
-                .counts
-                .data()
-                .iter()
-                .map(|c| (*c * 3).min(255) as u8)
-                .collect();
-            dataset_io::write_png_u8(
-                std::path::Path::new(&format!("{dir}/counts.png")),
-                w,
-                h,
-                1,
-                &cnt,
-                dataset_io::PngSpeed::Fast,
-            )?;
-        }
-        eprintln!("est max at ({}, {}) = {} (truth there {}); truth max at ({}, {}), est there {} counts {}", am % w, am / w, est[am], truth[am], tm % w, tm / w, est[tm], cal.counts.data()[am]);
-    }
     Ok(RunResult {
         rms,
         raw_rms,
@@ -234,9 +156,6 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
     ));
     if quick {
         configs.retain(|(n, _, _)| n == "typical" || n == "high_jpeg_detected");
-    }
-    if let Ok(only) = std::env::var("MONOVO_ONLY_CFG") {
-        configs.retain(|(n, _, _)| *n == only);
     }
     println!(
         "  {:<20} {:>9} {:>9} {:>7} {:>7} {:>7} {:>6} {:>4} {:>6} {:>6}",
@@ -284,7 +203,7 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
                 lower_is_better: false,
             });
         }
-        if name == "high_jpeg" {
+        if name == "high_jpeg" || (name == "typical" && size.0 < 640) {
             figures.push(Figure::lower("vignette.seconds", r.seconds, "s"));
             figures.push(Figure::lower("vignette.peak_rss_mb", r.peak_mb, "MB"));
         }

@@ -29,7 +29,7 @@ use std::str::FromStr;
 use crate::{CameraError, CameraModel, Intrinsics};
 
 /// An image size in pixels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct ImageSize {
     /// Width in pixels.
     pub width: usize,
@@ -99,7 +99,7 @@ impl FromStr for ImageSize {
 }
 
 /// The output camera requested on line 3 of camera.txt.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum OutputMode {
     /// The largest pinhole view without invalid pixels.
     Crop,
@@ -369,7 +369,7 @@ pub fn intrinsics_to_file_values(k: &Intrinsics, size: ImageSize) -> [f64; 4] {
 }
 
 /// A parsed camera.txt: the input camera and the requested output pinhole.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CameraFile {
     /// The input camera, in pixels of `input_size`.
     pub input: CameraModel,

@@ -3,7 +3,7 @@
 use crate::CameraError;
 
 /// A single-channel image stored row by row, `data[y * width + x]`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Image<T> {
     width: usize,
     height: usize,

@@ -8,7 +8,7 @@ use std::fmt;
 /// Pixel centres sit at integer coordinates: the centre of the top-left pixel is `(0, 0)`,
 /// its area spans `[-0.5, 0.5]^2`, and the centre of the bottom-right pixel of a `w x h`
 /// image is `(w - 1, h - 1)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Intrinsics {
     /// Focal length along x, in pixels.
     pub fx: f64,
@@ -52,7 +52,7 @@ impl Intrinsics {
 /// All models share the convention of [`Intrinsics`]: pixel centres at integer coordinates.
 /// `project` takes a point in the camera frame (`z` along the optical axis, `x` right,
 /// `y` down) and `unproject` returns a unit-length viewing direction.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum CameraModel {
     /// Ideal pinhole camera.
     Pinhole(Intrinsics),

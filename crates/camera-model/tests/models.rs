@@ -92,11 +92,13 @@ proptest! {
     ) {
         let (model, _) = all_models().swap_remove(which);
         let p = [depth * theta.sin() * phi.cos(), depth * theta.sin() * phi.sin(), depth * theta.cos()];
-        if let Some(px) = model.project(p) {
-            let ray = model.unproject(px).unwrap();
-            let dot = (ray[0] * p[0] + ray[1] * p[1] + ray[2] * p[2]) / depth;
-            prop_assert!(dot > 1.0 - 1e-12, "{} {:?} dot {}", model.name(), p, dot);
-        }
+        let px = model.project(p);
+        prop_assert!(px.is_some(), "{} does not project {:?}", model.name(), p);
+        let ray = model.unproject(px.unwrap());
+        prop_assert!(ray.is_some(), "{} does not unproject {:?}", model.name(), px);
+        let ray = ray.unwrap();
+        let dot = (ray[0] * p[0] + ray[1] * p[1] + ray[2] * p[2]) / depth;
+        prop_assert!(dot > 1.0 - 1e-12, "{} {:?} dot {}", model.name(), p, dot);
     }
 
     /// Pixels anywhere in the image survive the round trip (1e-6 px).

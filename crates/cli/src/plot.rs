@@ -1,18 +1,23 @@
-//! Plots written as PNG or SVG (chosen by the file extension): line charts with linear or
-//! logarithmic axes, legends, multi-panel figures and heat maps with a colour bar.
+//! Figures drawn with plotters, written as PNG or SVG (chosen by the file extension): line
+//! charts with linear or logarithmic axes, bands, legends, multi-panel figures and heat maps
+//! with a colour bar.
 //!
-//! Layout is computed once into drawing primitives in pixel coordinates; two small back ends
-//! turn them into an SVG document or an anti-aliased RGB raster.
+//! Text uses the DejaVu Sans font embedded in the binary (registered with plotters' ab_glyph
+//! renderer), so no system font is needed. PNG figures are drawn at three times their size
+//! and reduced, which anti-aliases lines and text; SVG figures are vector graphics at twice
+//! their size with a view box of the nominal size (half-pixel precision).
 
-use std::fmt::Write as _;
 use std::path::Path;
+use std::sync::OnceLock;
 
-use anyhow::{bail, Context, Result};
-use embedded_graphics::mono_font::{ascii, MonoFont, MonoTextStyle};
-use embedded_graphics::pixelcolor::Rgb888;
-use embedded_graphics::prelude::{DrawTarget, OriginDimensions, Point, RgbColor, Size};
-use embedded_graphics::text::{Baseline, Text};
-use embedded_graphics::{Drawable, Pixel};
+use anyhow::{anyhow, bail, Result};
+use plotters::coord::ranged1d::{Ranged, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use plotters::style::FontTransform;
+use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingErrorKind};
 
 /// An RGB colour.
 pub type Rgb = [u8; 3];
@@ -28,9 +33,6 @@ pub const PALETTE: [Rgb; 8] = [
     [227, 119, 194],
     [127, 127, 127],
 ];
-
-const BLACK: Rgb = [0, 0, 0];
-const GRID: Rgb = [225, 225, 225];
 
 /// One line of a chart.
 #[derive(Clone, Debug)]
@@ -73,11 +75,7 @@ impl Series {
         Series {
             label: label.into(),
             points: lower,
-            color: [
-                ((color[0] as u16 + 2 * 255) / 3) as u8,
-                ((color[1] as u16 + 2 * 255) / 3) as u8,
-                ((color[2] as u16 + 2 * 255) / 3) as u8,
-            ],
+            color: color.map(|c| ((c as u16 + 2 * 255) / 3) as u8),
             width: 2.0,
             dashed: false,
             band_upper: Some(upper),
@@ -91,7 +89,9 @@ impl Series {
     }
 }
 
-/// Where the legend goes inside the plot area.
+/// Where the legend should go inside the plot area. It is a preference: when the legend
+/// would cover data there, another free corner is taken, and when every corner holds data
+/// the legend goes below the chart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Corner {
     /// Top left.
@@ -100,6 +100,8 @@ pub enum Corner {
     TopRight,
     /// Bottom right.
     BottomRight,
+    /// Bottom left.
+    BottomLeft,
 }
 
 /// A chart of lines.
@@ -107,9 +109,9 @@ pub enum Corner {
 pub struct Chart {
     /// Title above the plot area.
     pub title: String,
-    /// x axis label.
+    /// x axis label (with its unit).
     pub x_label: String,
-    /// y axis label.
+    /// y axis label (with its unit).
     pub y_label: String,
     /// Logarithmic x axis.
     pub x_log: bool,
@@ -121,8 +123,10 @@ pub struct Chart {
     pub y_range: Option<[f64; 2]>,
     /// Same scale on both axes (trajectories).
     pub equal_aspect: bool,
-    /// Legend position, `None` for no legend.
+    /// Preferred legend position, `None` for no legend.
     pub legend: Option<Corner>,
+    /// Only whole numbers on the y axis (counts).
+    pub y_integer: bool,
 }
 
 impl Chart {
@@ -142,11 +146,13 @@ impl Chart {
             y_range: None,
             equal_aspect: false,
             legend: Some(Corner::TopLeft),
+            y_integer: false,
         }
     }
 }
 
-/// A scalar field shown with a colour map.
+/// A scalar field over image pixels shown with a colour map; its axes are the pixel
+/// coordinates (x to the right, y down).
 #[derive(Clone, Debug)]
 pub struct Heatmap {
     /// Title above the map.
@@ -194,126 +200,380 @@ impl Figure {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Anchor {
-    Start,
-    Middle,
-    End,
+/// A perceptually ordered colour map (viridis), `t` in [0, 1].
+pub fn colormap(t: f32) -> Rgb {
+    let c = ViridisRGB::get_color(t.clamp(0.0, 1.0));
+    [c.0, c.1, c.2]
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum FontSize {
-    Small,
-    Normal,
-    Title,
-}
+// ------------------------------------------------------------------------------- fonts
 
-impl FontSize {
-    fn mono(self) -> &'static MonoFont<'static> {
-        match self {
-            FontSize::Small => &ascii::FONT_6X10,
-            FontSize::Normal => &ascii::FONT_7X13,
-            FontSize::Title => &ascii::FONT_9X15_BOLD,
-        }
-    }
-    fn svg_px(self) -> f64 {
-        match self {
-            FontSize::Small => 10.0,
-            FontSize::Normal => 12.0,
-            FontSize::Title => 14.0,
-        }
-    }
-    fn char_width(self) -> f64 {
-        self.mono().character_size.width as f64
-    }
-}
+/// The font family name under which the embedded font is registered; SVG files name it
+/// too, with `sans-serif` as the viewer's fallback.
+const FAMILY: &str = "DejaVu Sans, sans-serif";
 
-#[derive(Clone, Debug)]
-enum Prim {
-    Polyline {
-        pts: Vec<[f64; 2]>,
-        color: Rgb,
-        width: f64,
-        dashed: bool,
-        clip: [f64; 4],
-    },
-    Text {
-        x: f64,
-        y: f64,
-        text: String,
-        color: Rgb,
-        size: FontSize,
-        anchor: Anchor,
-        vertical: bool,
-    },
-    Rect {
-        r: [f64; 4],
-        fill: Option<Rgb>,
-        stroke: Option<Rgb>,
-    },
-    Image {
-        r: [f64; 4],
-        w: usize,
-        h: usize,
-        rgb: Vec<u8>,
-    },
-}
+/// DejaVu Sans (Bitstream Vera licence, see assets/fonts/DejaVuSans-LICENSE.txt).
+static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
 
-/// Nice tick positions for a linear axis.
-fn linear_ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
-    let span = (hi - lo).abs().max(1e-300);
-    let raw = span / target.max(1) as f64;
-    let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
-        .iter()
-        .map(|m| m * mag)
-        .find(|s| span / s <= target as f64 + 0.5)
-        .unwrap_or(10.0 * mag);
-    let first = (lo / step).ceil() * step;
-    let mut out = Vec::new();
-    let mut v = first;
-    while v <= hi + step * 1e-9 && out.len() < 50 {
-        out.push(if v.abs() < step * 1e-9 { 0.0 } else { v });
-        v += step;
-    }
-    out
-}
-
-/// Ticks of a logarithmic axis: the decades, plus 2 and 5 times them when few decades show.
-fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
-    let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
-    let decades = (hi / lo).log10();
-    let mults: &[f64] = if decades <= 1.0 {
-        &[1.0, 1.2, 1.5, 2.0, 3.0, 5.0, 7.0]
-    } else if decades <= 2.5 {
-        &[1.0, 2.0, 5.0]
+fn register_font() -> Result<()> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    let ok = *REGISTERED
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if ok {
+        Ok(())
     } else {
-        &[1.0]
-    };
-    let mut out = Vec::new();
-    for e in a..=b {
-        for m in mults {
-            let v = m * 10f64.powi(e);
-            if v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9) {
-                out.push(v);
+        bail!("the embedded font does not load")
+    }
+}
+
+/// Type sizes in nominal pixels (line heights, as plotters counts them).
+const TITLE_PX: f64 = 19.0;
+const LABEL_PX: f64 = 17.0;
+const TICK_PX: f64 = 15.0;
+const LEGEND_PX: f64 = 15.0;
+
+/// Drawing scale: nominal pixels to back-end pixels.
+#[derive(Clone, Copy, Debug)]
+struct Scale(f64);
+
+impl Scale {
+    fn px(self, v: f64) -> i32 {
+        (v * self.0).round() as i32
+    }
+    fn upx(self, v: f64) -> u32 {
+        (v * self.0).round().max(1.0) as u32
+    }
+    fn font(self, px: f64) -> TextStyle<'static> {
+        (FAMILY, px * self.0).into_font().color(&BLACK)
+    }
+}
+
+/// Draws `title` centred at the top of `area` and returns the area below it (the whole area
+/// for an empty title).
+fn titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    k: Scale,
+) -> Result<DrawingArea<DB, Shift>> {
+    if title.is_empty() {
+        return Ok(area.clone());
+    }
+    let font = k.font(TITLE_PX).pos(Pos::new(HPos::Center, VPos::Top));
+    let (w, _) = area.dim_in_pixel();
+    let top = k.px(8.0);
+    area.draw_text(title, &font, ((w / 2) as i32, top))
+        .map_err(plot_err)?;
+    let (_, below) = area.split_vertically(top + k.px(TITLE_PX + 4.0));
+    Ok(below)
+}
+
+fn color(c: Rgb) -> RGBColor {
+    RGBColor(c[0], c[1], c[2])
+}
+
+fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("drawing the figure: {e:?}")
+}
+
+// ------------------------------------------------------------------------------- saving
+
+/// Nominal-to-back-end scale of PNG figures (drawn large, then reduced: anti-aliasing).
+const PNG_SUPERSAMPLE: u32 = 3;
+/// Scale of SVG figures (coordinates are integers: half-pixel precision at 2).
+const SVG_SCALE: u32 = 2;
+
+/// The file formats a figure can be written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// A bitmap, anti-aliased.
+    Png,
+    /// Vector graphics.
+    Svg,
+}
+
+/// The format of a figure file by its extension (`.png` or `.svg`, any case). Any other
+/// extension, or none, is an error that names it and the accepted ones: commands call this
+/// before their work.
+pub fn format_of(path: &Path) -> Result<Format> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("png") => Ok(Format::Png),
+        Some("svg") => Ok(Format::Svg),
+        Some(other) => bail!(
+            "{}: cannot write a figure as `.{other}`: use a file name ending in .png or .svg",
+            path.display()
+        ),
+        None => bail!(
+            "{}: the file name has no extension: use a file name ending in .png or .svg",
+            path.display()
+        ),
+    }
+}
+
+/// Writes the figure as PNG or SVG by the extension of `path` (atomically); see
+/// [`format_of`].
+pub fn save(fig: &Figure, path: &Path) -> Result<()> {
+    match format_of(path)? {
+        Format::Png => {
+            let rgb = render_rgb(fig)?;
+            dataset_io::write_png_u8(
+                path,
+                fig.width as usize,
+                fig.height as usize,
+                3,
+                &rgb,
+                dataset_io::PngSpeed::Default,
+            )?;
+        }
+        Format::Svg => {
+            let svg = render_svg(fig)?;
+            dataset_io::write_atomic(path, svg.as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// plotters' ab_glyph renderer puts the baseline half a font size below the top of the
+/// text's layout box, so bitmap text sits about a fifth of its size above where the layout
+/// (and the SVG back end) puts it: titles lose their tops, tick labels sit above their
+/// ticks. This back end draws text as plotters' default does, moved down by that amount
+/// (cap height centred in the layout box), and passes everything else to the bitmap.
+struct TextAligned<'a>(BitMapBackend<'a>);
+
+/// How far (in font sizes) bitmap text is moved down; DejaVu's cap height is 0.63 of the
+/// size ab_glyph scales to, the layout box 1/1.24 of it.
+const TEXT_DROP: f64 = 0.5 / 1.24 + 0.63 / 2.0 - 0.5;
+
+impl DrawingBackend for TextAligned<'_> {
+    type ErrorType = <BitMapBackend<'static> as DrawingBackend>::ErrorType;
+
+    fn get_size(&self) -> (u32, u32) {
+        self.0.get_size()
+    }
+    fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.ensure_prepared()
+    }
+    fn present(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.present()
+    }
+    fn draw_pixel(
+        &mut self,
+        point: BackendCoord,
+        color: BackendColor,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_pixel(point, color)
+    }
+    fn draw_line<S: plotters_backend::BackendStyle>(
+        &mut self,
+        from: BackendCoord,
+        to: BackendCoord,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_line(from, to, style)
+    }
+    fn draw_rect<S: plotters_backend::BackendStyle>(
+        &mut self,
+        upper_left: BackendCoord,
+        bottom_right: BackendCoord,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_rect(upper_left, bottom_right, style, fill)
+    }
+    fn draw_path<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        path: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_path(path, style)
+    }
+    fn draw_circle<S: plotters_backend::BackendStyle>(
+        &mut self,
+        center: BackendCoord,
+        radius: u32,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_circle(center, radius, style, fill)
+    }
+    fn fill_polygon<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        vert: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.fill_polygon(vert, style)
+    }
+    fn blit_bitmap(
+        &mut self,
+        pos: BackendCoord,
+        (iw, ih): (u32, u32),
+        src: &[u8],
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.blit_bitmap(pos, (iw, ih), src)
+    }
+    fn draw_text<S: BackendTextStyle>(
+        &mut self,
+        text: &str,
+        style: &S,
+        pos: BackendCoord,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        if style.color().alpha == 0.0 {
+            return Ok(());
+        }
+        let ((x0, y0), (x1, y1)) = style
+            .layout_box(text)
+            .map_err(|e| DrawingErrorKind::FontError(Box::new(e)))?;
+        let (w, h) = (x1 - x0, y1 - y0);
+        let dx = match style.anchor().h_pos {
+            HPos::Left => 0,
+            HPos::Center => -w / 2,
+            HPos::Right => -w,
+        };
+        let dy = match style.anchor().v_pos {
+            VPos::Top => 0,
+            VPos::Center => -h / 2,
+            VPos::Bottom => -h,
+        } + (TEXT_DROP * style.size()).round() as i32;
+        let transform = style.transform();
+        let (bw, bh) = self.0.get_size();
+        let inner = &mut self.0;
+        style
+            .draw(text, (0, 0), |x, y, color| {
+                let (x, y) = transform.transform(x + dx - x0, y + dy - y0);
+                let (x, y) = (pos.0 + x, pos.1 + y);
+                if x >= 0 && y >= 0 && x < bw as i32 && y < bh as i32 {
+                    inner.draw_pixel((x, y), color)
+                } else {
+                    Ok(())
+                }
+            })
+            .map_err(|e| DrawingErrorKind::FontError(Box::new(e)))?
+    }
+}
+
+/// The figure as RGB pixels (`width * height * 3` bytes).
+fn render_rgb(fig: &Figure) -> Result<Vec<u8>> {
+    register_font()?;
+    let s = PNG_SUPERSAMPLE;
+    let (w, h) = (fig.width.max(1), fig.height.max(1));
+    let (bw, bh) = (w * s, h * s);
+    let mut big = vec![255u8; bw as usize * bh as usize * 3];
+    {
+        let root = TextAligned(BitMapBackend::with_buffer(&mut big, (bw, bh))).into_drawing_area();
+        draw_figure(&root, fig, Scale(f64::from(s)), false)?;
+        root.present().map_err(plot_err)?;
+    }
+    // box filter: each output pixel is the mean of its s x s block
+    let (w, h, s, bw) = (w as usize, h as usize, s as usize, bw as usize);
+    let mut out = vec![0u8; w * h * 3];
+    for (i, px) in out.chunks_exact_mut(3).enumerate() {
+        let (x, y) = (i % w, i / w);
+        let mut sum = [0u32; 3];
+        for dy in 0..s {
+            let row = (y * s + dy) * bw + x * s;
+            for p in big[row * 3..(row + s) * 3].chunks_exact(3) {
+                for (acc, v) in sum.iter_mut().zip(p) {
+                    *acc += u32::from(*v);
+                }
             }
         }
+        let n = (s * s) as u32;
+        for (o, acc) in px.iter_mut().zip(sum) {
+            *o = ((acc + n / 2) / n) as u8;
+        }
     }
-    out
+    debug_assert_eq!(out.len(), w * h * 3);
+    Ok(out)
 }
 
-/// Compact tick label.
-fn fmt_tick(v: f64) -> String {
-    let a = v.abs();
-    if v == 0.0 {
-        "0".into()
-    } else if !(1e-3..1e5).contains(&a) {
-        format!("{v:.0e}")
-    } else if a >= 100.0 || (v.fract() == 0.0) {
-        format!("{v:.0}")
-    } else {
-        let s = format!("{v:.3}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
+/// The figure as an SVG document of the nominal size.
+fn render_svg(fig: &Figure) -> Result<String> {
+    register_font()?;
+    let s = SVG_SCALE;
+    let (w, h) = (fig.width.max(1), fig.height.max(1));
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, (w * s, h * s)).into_drawing_area();
+        draw_figure(&root, fig, Scale(f64::from(s)), true)?;
+        root.present().map_err(plot_err)?;
+    }
+    // show the drawing at its nominal size; the view box keeps the finer coordinates
+    let big = format!(r#"width="{}" height="{}""#, w * s, h * s);
+    Ok(text.replacen(&big, &format!(r#"width="{w}" height="{h}""#), 1))
+}
+
+fn draw_figure<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fig: &Figure,
+    k: Scale,
+    vector: bool,
+) -> Result<()> {
+    root.fill(&WHITE).map_err(plot_err)?;
+    let (bw, bh) = root.dim_in_pixel();
+    for (panel, f) in &fig.panels {
+        let x0 = (f[0] * f64::from(bw)).round() as i32;
+        let y0 = (f[1] * f64::from(bh)).round() as i32;
+        let pw = (f[2] * f64::from(bw)).round().max(1.0) as u32;
+        let ph = (f[3] * f64::from(bh)).round().max(1.0) as u32;
+        let area = root.clone().shrink((x0, y0), (pw, ph));
+        match panel {
+            Panel::Chart(c) => draw_chart(&area, c, k)?,
+            Panel::Heatmap(h) => draw_heatmap(&area, h, k, vector)?,
+        }
+    }
+    Ok(())
+}
+
+// ------------------------------------------------------------------------------- charts
+
+/// Tick labels of an axis: as many decimals as the spacing of the ticks needs (plotters
+/// puts them at 1, 2 or 5 times a power of ten), trailing zeros dropped, scientific
+/// notation for very small or large spacings.
+#[derive(Clone, Copy, Debug)]
+struct TickFormat {
+    /// The (smallest possible) spacing of the ticks; 0 on a logarithmic axis, where each
+    /// label is written by its own magnitude.
+    step: f64,
+}
+
+impl TickFormat {
+    /// A linear axis over `span` with at most `labels` labels.
+    fn linear(span: f64, labels: usize) -> TickFormat {
+        TickFormat {
+            step: span.abs() / labels.max(1) as f64,
+        }
+    }
+
+    /// A logarithmic axis (ticks at 1, 2 or 5 times powers of ten).
+    const LOG: TickFormat = TickFormat { step: 0.0 };
+
+    fn format(self, v: f64) -> String {
+        if v == 0.0 || !v.is_finite() {
+            return if v == 0.0 { "0".into() } else { v.to_string() };
+        }
+        let step = if self.step > 0.0 { self.step } else { v.abs() };
+        let mag = step.log10().floor();
+        let trim = |t: &str| -> String {
+            if t.contains('.') {
+                t.trim_end_matches('0').trim_end_matches('.').to_string()
+            } else {
+                t.to_string()
+            }
+        };
+        if !(-4.0..6.0).contains(&mag) || v.abs() >= 1e7 {
+            let t = format!("{v:.2e}");
+            let (mantissa, exp) = t.split_once('e').unwrap_or((&t, "0"));
+            return format!("{}e{exp}", trim(mantissa));
+        }
+        let decimals = (1.0 - mag).max(0.0) as usize;
+        let t = trim(&format!("{v:.decimals$}"));
+        if t == "-0" {
+            "0".into()
+        } else {
+            t
+        }
     }
 }
 
@@ -321,7 +581,7 @@ fn data_range(series: &[Series], axis: usize, log: bool) -> Option<[f64; 2]> {
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
     for s in series {
-        for p in &s.points {
+        for p in s.points.iter().chain(s.band_upper.iter().flatten()) {
             let v = p[axis];
             if v.is_finite() && (!log || v > 0.0) {
                 lo = lo.min(v);
@@ -343,24 +603,8 @@ fn data_range(series: &[Series], axis: usize, log: bool) -> Option<[f64; 2]> {
     Some([lo, hi])
 }
 
-fn layout_chart(c: &Chart, area: [f64; 4], out: &mut Vec<Prim>) {
-    let [ax, ay, aw, ah] = area;
-    let (ml, mr, mt, mb) = (62.0, 16.0, 28.0, 44.0);
-    let pr = [
-        ax + ml,
-        ay + mt,
-        (aw - ml - mr).max(10.0),
-        (ah - mt - mb).max(10.0),
-    ];
-    out.push(Prim::Text {
-        x: ax + aw / 2.0,
-        y: ay + 6.0,
-        text: c.title.clone(),
-        color: BLACK,
-        size: FontSize::Title,
-        anchor: Anchor::Middle,
-        vertical: false,
-    });
+/// The axis ranges of a chart: given, or the data's with a small margin.
+fn chart_ranges(c: &Chart) -> ([f64; 2], [f64; 2]) {
     let mut xr = c
         .x_range
         .or_else(|| data_range(&c.series, 0, c.x_log))
@@ -379,706 +623,832 @@ fn layout_chart(c: &Chart, area: [f64; 4], out: &mut Vec<Prim>) {
         let pad = (yr[1] - yr[0]) * 0.04;
         yr = [yr[0] - pad, yr[1] + pad];
     }
-    if c.equal_aspect {
-        // expand the smaller span so one data unit is the same length on both axes
-        let sx = pr[2] / (xr[1] - xr[0]);
-        let sy = pr[3] / (yr[1] - yr[0]);
-        if sx > sy {
-            let need = pr[2] / sy;
-            let mid = 0.5 * (xr[0] + xr[1]);
-            xr = [mid - need / 2.0, mid + need / 2.0];
+    if xr[1] <= xr[0] {
+        xr[1] = xr[0] + 1.0;
+    }
+    if yr[1] <= yr[0] {
+        yr[1] = yr[0] + 1.0;
+    }
+    (xr, yr)
+}
+
+/// Maps data to the chart's axis space (log10 on a logarithmic x axis) and back.
+#[derive(Clone, Copy)]
+struct AxisSpace {
+    x_log: bool,
+}
+
+impl AxisSpace {
+    fn to_axis(self, p: [f64; 2]) -> [f64; 2] {
+        if self.x_log {
+            [p[0].log10(), p[1]]
         } else {
-            let need = pr[3] / sx;
-            let mid = 0.5 * (yr[0] + yr[1]);
-            yr = [mid - need / 2.0, mid + need / 2.0];
+            p
         }
     }
-    let tx = |x: f64| -> f64 {
-        if c.x_log {
-            let (a, b) = (xr[0].log10(), xr[1].log10());
-            pr[0] + (x.max(1e-300).log10() - a) / (b - a) * pr[2]
+    fn to_data(self, p: [f64; 2]) -> [f64; 2] {
+        if self.x_log {
+            [10f64.powf(p[0]), p[1]]
         } else {
-            pr[0] + (x - xr[0]) / (xr[1] - xr[0]) * pr[2]
+            p
         }
-    };
-    let ty = |y: f64| -> f64 { pr[1] + pr[3] - (y - yr[0]) / (yr[1] - yr[0]) * pr[3] };
-    // grid and ticks
-    let xt = if c.x_log {
-        log_ticks(xr[0], xr[1])
-    } else {
-        linear_ticks(xr[0], xr[1], (pr[2] / 90.0) as usize + 1)
-    };
-    let yt = linear_ticks(yr[0], yr[1], (pr[3] / 60.0) as usize + 1);
-    for &v in &xt {
-        let x = tx(v);
-        out.push(Prim::Polyline {
-            pts: vec![[x, pr[1]], [x, pr[1] + pr[3]]],
-            color: GRID,
-            width: 1.0,
-            dashed: false,
-            clip: pr,
-        });
-        out.push(Prim::Text {
-            x,
-            y: pr[1] + pr[3] + 6.0,
-            text: fmt_tick(v),
-            color: BLACK,
-            size: FontSize::Small,
-            anchor: Anchor::Middle,
-            vertical: false,
-        });
     }
-    for &v in &yt {
-        let y = ty(v);
-        out.push(Prim::Polyline {
-            pts: vec![[pr[0], y], [pr[0] + pr[2], y]],
-            color: GRID,
-            width: 1.0,
-            dashed: false,
-            clip: pr,
-        });
-        out.push(Prim::Text {
-            x: pr[0] - 5.0,
-            y: y - 5.0,
-            text: fmt_tick(v),
-            color: BLACK,
-            size: FontSize::Small,
-            anchor: Anchor::End,
-            vertical: false,
-        });
+    fn valid(self, p: [f64; 2]) -> bool {
+        p[0].is_finite() && p[1].is_finite() && (!self.x_log || p[0] > 0.0)
     }
-    out.push(Prim::Text {
-        x: pr[0] + pr[2] / 2.0,
-        y: pr[1] + pr[3] + 22.0,
-        text: c.x_label.clone(),
-        color: BLACK,
-        size: FontSize::Normal,
-        anchor: Anchor::Middle,
-        vertical: false,
-    });
-    out.push(Prim::Text {
-        x: ax + 4.0,
-        y: pr[1] + pr[3] / 2.0,
-        text: c.y_label.clone(),
-        color: BLACK,
-        size: FontSize::Normal,
-        anchor: Anchor::Middle,
-        vertical: true,
-    });
-    for s in &c.series {
-        if let Some(upper) = &s.band_upper {
-            // filled by vertical strokes one data step wide
-            let step = s
-                .points
-                .windows(2)
-                .map(|w| (tx(w[1][0]) - tx(w[0][0])).abs())
-                .fold(f64::INFINITY, f64::min)
-                .clamp(1.0, 6.0);
-            for (lo, hi) in s.points.iter().zip(upper) {
-                if [lo[0], lo[1], hi[1]].iter().all(|v| v.is_finite()) {
-                    let (x, y0, y1) = (tx(lo[0]), ty(lo[1]), ty(hi[1]));
-                    out.push(Prim::Polyline {
-                        pts: vec![[x, y0], [x, y1.min(y0 - 1.0)]],
-                        color: s.color,
-                        width: step + 0.5,
-                        dashed: false,
-                        clip: pr,
-                    });
-                }
+}
+
+/// Clips a segment to the rectangle `[x0, x1] x [y0, y1]` (Liang-Barsky).
+fn clip_segment(a: [f64; 2], b: [f64; 2], r: [f64; 4]) -> Option<([f64; 2], [f64; 2])> {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [
+        (-d[0], a[0] - r[0]),
+        (d[0], r[1] - a[0]),
+        (-d[1], a[1] - r[2]),
+        (d[1], r[3] - a[1]),
+    ] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return None;
             }
+        } else {
+            let t = q / p;
+            if p < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+        }
+    }
+    (t0 <= t1).then(|| {
+        (
+            [a[0] + t0 * d[0], a[1] + t0 * d[1]],
+            [a[0] + t1 * d[0], a[1] + t1 * d[1]],
+        )
+    })
+}
+
+/// The visible pieces of a polyline: broken at non-finite points, clipped to `r` (axis
+/// space), returned in data coordinates.
+fn visible_runs(points: &[[f64; 2]], space: AxisSpace, r: [f64; 4]) -> Vec<Vec<(f64, f64)>> {
+    let mut runs = Vec::new();
+    let mut cur: Vec<[f64; 2]> = Vec::new();
+    let mut flush = |cur: &mut Vec<[f64; 2]>| {
+        if cur.len() >= 2 {
+            runs.push(
+                cur.iter()
+                    .map(|p| {
+                        let d = space.to_data(*p);
+                        (d[0], d[1])
+                    })
+                    .collect(),
+            );
+        }
+        cur.clear();
+    };
+    let mut prev: Option<[f64; 2]> = None;
+    for &p in points {
+        if !space.valid(p) {
+            flush(&mut cur);
+            prev = None;
             continue;
         }
-        let mut run: Vec<[f64; 2]> = Vec::new();
-        let flush = |run: &mut Vec<[f64; 2]>, out: &mut Vec<Prim>| {
-            if run.len() >= 2 {
-                out.push(Prim::Polyline {
-                    pts: std::mem::take(run),
-                    color: s.color,
-                    width: s.width,
-                    dashed: s.dashed,
-                    clip: pr,
-                });
-            } else {
-                run.clear();
-            }
-        };
-        for p in &s.points {
-            if p[0].is_finite() && p[1].is_finite() && (!c.x_log || p[0] > 0.0) {
-                run.push([tx(p[0]), ty(p[1])]);
-            } else {
-                flush(&mut run, out);
-            }
-        }
-        flush(&mut run, out);
-    }
-    out.push(Prim::Rect {
-        r: pr,
-        fill: None,
-        stroke: Some(BLACK),
-    });
-    if let Some(corner) = c.legend {
-        let entries: Vec<&Series> = c.series.iter().filter(|s| !s.label.is_empty()).collect();
-        if !entries.is_empty() {
-            let cw = FontSize::Normal.char_width();
-            let lw = entries.iter().map(|s| s.label.len()).max().unwrap_or(0) as f64 * cw + 44.0;
-            let lh = entries.len() as f64 * 17.0 + 8.0;
-            let (lx, ly) = match corner {
-                Corner::TopLeft => (pr[0] + 8.0, pr[1] + 8.0),
-                Corner::TopRight => (pr[0] + pr[2] - lw - 8.0, pr[1] + 8.0),
-                Corner::BottomRight => (pr[0] + pr[2] - lw - 8.0, pr[1] + pr[3] - lh - 8.0),
-            };
-            out.push(Prim::Rect {
-                r: [lx, ly, lw, lh],
-                fill: Some([255, 255, 255]),
-                stroke: Some([160, 160, 160]),
-            });
-            for (i, s) in entries.iter().enumerate() {
-                let y = ly + 12.0 + i as f64 * 17.0;
-                out.push(Prim::Polyline {
-                    pts: vec![[lx + 6.0, y], [lx + 32.0, y]],
-                    color: s.color,
-                    width: s.width,
-                    dashed: s.dashed,
-                    clip: [0.0, 0.0, 1e9, 1e9],
-                });
-                out.push(Prim::Text {
-                    x: lx + 38.0,
-                    y: y - 6.0,
-                    text: s.label.clone(),
-                    color: BLACK,
-                    size: FontSize::Normal,
-                    anchor: Anchor::Start,
-                    vertical: false,
-                });
-            }
-        }
-    }
-}
-
-/// A perceptually ordered colour map (viridis-like), `t` in [0, 1].
-pub fn colormap(t: f32) -> Rgb {
-    const STOPS: [[f32; 3]; 6] = [
-        [68.0, 1.0, 84.0],
-        [65.0, 68.0, 135.0],
-        [42.0, 120.0, 142.0],
-        [34.0, 168.0, 132.0],
-        [122.0, 209.0, 81.0],
-        [253.0, 231.0, 37.0],
-    ];
-    let t = t.clamp(0.0, 1.0) * (STOPS.len() - 1) as f32;
-    let i = (t.floor() as usize).min(STOPS.len() - 2);
-    let f = t - i as f32;
-    let (a, b) = (STOPS[i], STOPS[i + 1]);
-    [0, 1, 2].map(|k| (a[k] + f * (b[k] - a[k])).round() as u8)
-}
-
-fn layout_heatmap(h: &Heatmap, area: [f64; 4], out: &mut Vec<Prim>) {
-    let [ax, ay, aw, ah] = area;
-    out.push(Prim::Text {
-        x: ax + aw / 2.0,
-        y: ay + 6.0,
-        text: h.title.clone(),
-        color: BLACK,
-        size: FontSize::Title,
-        anchor: Anchor::Middle,
-        vertical: false,
-    });
-    let avail = [aw - 100.0, ah - 40.0];
-    let scale = (avail[0] / h.width as f64)
-        .min(avail[1] / h.height as f64)
-        .max(1e-6);
-    let (iw, ih) = (h.width as f64 * scale, h.height as f64 * scale);
-    let r = [ax + 10.0 + (avail[0] - iw) / 2.0, ay + 28.0, iw, ih];
-    let span = (h.range[1] - h.range[0]).max(1e-12);
-    let mut rgb = Vec::with_capacity(h.values.len() * 3);
-    for &v in &h.values {
-        let c = if v.is_finite() {
-            colormap((v - h.range[0]) / span)
-        } else {
-            [128, 128, 128]
-        };
-        rgb.extend_from_slice(&c);
-    }
-    out.push(Prim::Image {
-        r,
-        w: h.width,
-        h: h.height,
-        rgb,
-    });
-    out.push(Prim::Rect {
-        r,
-        fill: None,
-        stroke: Some(BLACK),
-    });
-    // colour bar
-    let bar = [r[0] + r[2] + 16.0, r[1], 14.0, r[3]];
-    let steps = 64;
-    let mut rgb = Vec::with_capacity(steps * 3);
-    for i in 0..steps {
-        rgb.extend_from_slice(&colormap(1.0 - i as f32 / (steps - 1) as f32));
-    }
-    out.push(Prim::Image {
-        r: bar,
-        w: 1,
-        h: steps,
-        rgb,
-    });
-    out.push(Prim::Rect {
-        r: bar,
-        fill: None,
-        stroke: Some(BLACK),
-    });
-    for v in linear_ticks(h.range[0] as f64, h.range[1] as f64, 5) {
-        let y = bar[1] + bar[3] - (v - h.range[0] as f64) / span as f64 * bar[3];
-        out.push(Prim::Text {
-            x: bar[0] + bar[2] + 4.0,
-            y: y - 5.0,
-            text: fmt_tick(v),
-            color: BLACK,
-            size: FontSize::Small,
-            anchor: Anchor::Start,
-            vertical: false,
-        });
-    }
-    out.push(Prim::Text {
-        x: r[0] + r[2] / 2.0,
-        y: r[1] + r[3] + 6.0,
-        text: h.label.clone(),
-        color: BLACK,
-        size: FontSize::Normal,
-        anchor: Anchor::Middle,
-        vertical: false,
-    });
-}
-
-fn layout(fig: &Figure) -> Vec<Prim> {
-    let mut out = vec![Prim::Rect {
-        r: [0.0, 0.0, fig.width as f64, fig.height as f64],
-        fill: Some([255, 255, 255]),
-        stroke: None,
-    }];
-    for (panel, f) in &fig.panels {
-        let area = [
-            f[0] * fig.width as f64,
-            f[1] * fig.height as f64,
-            f[2] * fig.width as f64,
-            f[3] * fig.height as f64,
-        ];
-        match panel {
-            Panel::Chart(c) => layout_chart(c, area, &mut out),
-            Panel::Heatmap(h) => layout_heatmap(h, area, &mut out),
-        }
-    }
-    out
-}
-
-/// Splits a polyline into dashes of `on` pixels separated by `off`.
-fn dash(pts: &[[f64; 2]], on: f64, off: f64) -> Vec<Vec<[f64; 2]>> {
-    let mut out = Vec::new();
-    let mut cur: Vec<[f64; 2]> = vec![pts[0]];
-    let mut drawing = true;
-    let mut left = on;
-    for w in pts.windows(2) {
-        let (mut a, b) = (w[0], w[1]);
-        let mut len = (b[0] - a[0]).hypot(b[1] - a[1]);
-        while len > 0.0 {
-            let step = left.min(len);
-            let f = step / len;
-            let p = [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f];
-            if drawing {
-                cur.push(p);
-            }
-            left -= step;
-            len -= step;
-            a = p;
-            if left <= 1e-9 {
-                if drawing && cur.len() >= 2 {
-                    out.push(std::mem::take(&mut cur));
-                }
-                drawing = !drawing;
-                left = if drawing { on } else { off };
-                cur = if drawing { vec![a] } else { Vec::new() };
-            }
-        }
-    }
-    if drawing && cur.len() >= 2 {
-        out.push(cur);
-    }
-    out
-}
-
-// ---------------------------------------------------------------- SVG back end
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
-
-fn base64(data: &[u8]) -> String {
-    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut s = String::with_capacity(data.len().div_ceil(3) * 4);
-    for c in data.chunks(3) {
-        let b = [c[0], *c.get(1).unwrap_or(&0), *c.get(2).unwrap_or(&0)];
-        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
-        for i in 0..4 {
-            if i <= c.len() {
-                s.push(T[(n >> (18 - 6 * i) & 63) as usize] as char);
-            } else {
-                s.push('=');
-            }
-        }
-    }
-    s
-}
-
-fn to_svg(fig: &Figure, prims: &[Prim]) -> Result<String> {
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif">"#,
-        w = fig.width,
-        h = fig.height
-    );
-    let mut clips: Vec<[f64; 4]> = Vec::new();
-    for p in prims {
-        if let Prim::Polyline { clip, .. } = p {
-            if !clips.contains(clip) {
-                clips.push(*clip);
-            }
-        }
-    }
-    s.push_str("<defs>\n");
-    for (i, c) in clips.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            r#"<clipPath id="c{i}"><rect x="{:.2}" y="{:.2}" width="{:.2}" height="{:.2}"/></clipPath>"#,
-            c[0], c[1], c[2], c[3]
-        );
-    }
-    s.push_str("</defs>\n");
-    let col = |c: &Rgb| format!("rgb({},{},{})", c[0], c[1], c[2]);
-    for p in prims {
-        match p {
-            Prim::Polyline {
-                pts,
-                color,
-                width,
-                dashed,
-                clip,
-            } => {
-                let ci = clips.iter().position(|c| c == clip).unwrap_or(0);
-                let mut pts_s = String::with_capacity(pts.len() * 14);
-                for q in pts {
-                    let _ = write!(pts_s, "{:.2},{:.2} ", q[0], q[1]);
-                }
-                let _ = writeln!(
-                    s,
-                    r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="{}"{} stroke-linejoin="round" clip-path="url(#c{ci})"/>"#,
-                    pts_s.trim_end(),
-                    col(color),
-                    width,
-                    if *dashed {
-                        r#" stroke-dasharray="8,5""#
-                    } else {
-                        ""
+        let q = space.to_axis(p);
+        if let Some(a) = prev {
+            match clip_segment(a, q, r) {
+                Some((s, e)) => {
+                    if cur.last() != Some(&s) {
+                        flush(&mut cur);
+                        cur.push(s);
                     }
-                );
-            }
-            Prim::Text {
-                x,
-                y,
-                text,
-                color,
-                size,
-                anchor,
-                vertical,
-            } => {
-                let a = match anchor {
-                    Anchor::Start => "start",
-                    Anchor::Middle => "middle",
-                    Anchor::End => "end",
-                };
-                let fs = size.svg_px();
-                let weight = if *size == FontSize::Title {
-                    r#" font-weight="bold""#
-                } else {
-                    ""
-                };
-                if *vertical {
-                    let (cx, cy) = (x + fs, *y);
-                    let _ = writeln!(
-                        s,
-                        r#"<text x="{cx:.2}" y="{cy:.2}" font-size="{fs}" text-anchor="{a}" fill="{}"{weight} transform="rotate(-90 {cx:.2} {cy:.2})">{}</text>"#,
-                        col(color),
-                        xml_escape(text)
-                    );
-                } else {
-                    let _ = writeln!(
-                        s,
-                        r#"<text x="{x:.2}" y="{:.2}" font-size="{fs}" text-anchor="{a}" fill="{}"{weight}>{}</text>"#,
-                        y + fs,
-                        col(color),
-                        xml_escape(text)
-                    );
+                    cur.push(e);
+                    if e != q {
+                        flush(&mut cur);
+                    }
                 }
-            }
-            Prim::Rect { r, fill, stroke } => {
-                let _ = writeln!(
-                    s,
-                    r#"<rect x="{:.2}" y="{:.2}" width="{:.2}" height="{:.2}" fill="{}" stroke="{}"/>"#,
-                    r[0],
-                    r[1],
-                    r[2],
-                    r[3],
-                    fill.map_or("none".into(), |c| col(&c)),
-                    stroke.map_or("none".into(), |c| col(&c))
-                );
-            }
-            Prim::Image { r, w, h, rgb } => {
-                let png = dataset_io::encode_png_u8(*w, *h, 3, rgb, dataset_io::PngSpeed::Default)
-                    .context("encoding an embedded image")?;
-                let _ = writeln!(
-                    s,
-                    r#"<image x="{:.2}" y="{:.2}" width="{:.2}" height="{:.2}" preserveAspectRatio="none" style="image-rendering:pixelated" href="data:image/png;base64,{}"/>"#,
-                    r[0],
-                    r[1],
-                    r[2],
-                    r[3],
-                    base64(&png)
-                );
+                None => flush(&mut cur),
             }
         }
+        prev = Some(q);
     }
-    s.push_str("</svg>\n");
-    Ok(s)
+    flush(&mut cur);
+    runs
 }
 
-// ---------------------------------------------------------------- raster back end
-
-struct Raster {
-    w: usize,
-    h: usize,
-    px: Vec<[f32; 3]>,
-}
-
-impl Raster {
-    fn blend(&mut self, x: i64, y: i64, c: Rgb, a: f32) {
-        if x < 0 || y < 0 || x >= self.w as i64 || y >= self.h as i64 || a <= 0.0 {
-            return;
-        }
-        let p = &mut self.px[y as usize * self.w + x as usize];
-        for k in 0..3 {
-            p[k] += (c[k] as f32 - p[k]) * a.min(1.0);
-        }
-    }
-
-    /// Anti-aliased thick segment by distance coverage, clipped to `clip`.
-    fn segment(&mut self, a: [f64; 2], b: [f64; 2], c: Rgb, width: f64, clip: [f64; 4]) {
-        let r = width / 2.0;
-        let x0 = (a[0].min(b[0]) - r - 1.0).max(clip[0]).floor() as i64;
-        let x1 = (a[0].max(b[0]) + r + 1.0).min(clip[0] + clip[2]).ceil() as i64;
-        let y0 = (a[1].min(b[1]) - r - 1.0).max(clip[1]).floor() as i64;
-        let y1 = (a[1].max(b[1]) + r + 1.0).min(clip[1] + clip[3]).ceil() as i64;
-        let d = [b[0] - a[0], b[1] - a[1]];
-        let len2 = d[0] * d[0] + d[1] * d[1];
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let p = [x as f64 + 0.5, y as f64 + 0.5];
-                let t = if len2 > 0.0 {
-                    (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let q = [a[0] + t * d[0], a[1] + t * d[1]];
-                let dist = (p[0] - q[0]).hypot(p[1] - q[1]);
-                let cov = (r + 0.5 - dist).clamp(0.0, 1.0);
-                if cov > 0.0 {
-                    self.blend(x, y, c, cov as f32);
-                }
+/// Clips a polygon to the rectangle `r` (Sutherland-Hodgman; the rectangle is convex).
+fn clip_polygon(poly: Vec<[f64; 2]>, r: [f64; 4]) -> Vec<[f64; 2]> {
+    let edges: [(usize, f64, bool); 4] = [
+        (0, r[0], true),
+        (0, r[1], false),
+        (1, r[2], true),
+        (1, r[3], false),
+    ];
+    let mut out = poly;
+    for (axis, bound, keep_above) in edges {
+        let inside = |p: &[f64; 2]| {
+            if keep_above {
+                p[axis] >= bound
+            } else {
+                p[axis] <= bound
             }
-        }
-    }
-
-    fn polyline(&mut self, pts: &[[f64; 2]], c: Rgb, width: f64, clip: [f64; 4]) {
-        for w in pts.windows(2) {
-            self.segment(w[0], w[1], c, width, clip);
-        }
-    }
-
-    fn text(&mut self, x: f64, y: f64, text: &str, style: (Rgb, FontSize, Anchor, bool)) {
-        let (c, size, anchor, vertical) = style;
-        let font = size.mono();
-        let tw = text.chars().count() as f64 * size.char_width();
-        let th = font.character_size.height as usize;
-        // render horizontally into a mask, then blit (rotated for vertical text)
-        let mut mask = Mask {
-            w: tw.ceil() as usize + 1,
-            h: th,
-            a: vec![false; (tw.ceil() as usize + 1) * th],
         };
-        let style = MonoTextStyle::new(font, Rgb888::BLACK);
-        let _ = Text::with_baseline(text, Point::new(0, 0), style, Baseline::Top).draw(&mut mask);
-        let off = match anchor {
-            Anchor::Start => 0.0,
-            Anchor::Middle => tw / 2.0,
-            Anchor::End => tw,
-        };
-        for my in 0..mask.h {
-            for mx in 0..mask.w {
-                if !mask.a[my * mask.w + mx] {
-                    continue;
+        let input = std::mem::take(&mut out);
+        for (i, &cur) in input.iter().enumerate() {
+            let prev = input[(i + input.len() - 1) % input.len()];
+            let cross = |a: [f64; 2], b: [f64; 2]| {
+                let t = (bound - a[axis]) / (b[axis] - a[axis]);
+                [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+            };
+            match (inside(&prev), inside(&cur)) {
+                (true, true) => out.push(cur),
+                (true, false) => out.push(cross(prev, cur)),
+                (false, true) => {
+                    out.push(cross(prev, cur));
+                    out.push(cur);
                 }
-                let (px, py) = if vertical {
-                    // reading bottom to top, centred at (x + h/2, y)
-                    (x + my as f64, y + off - mx as f64)
-                } else {
-                    (x - off + mx as f64, y + my as f64)
-                };
-                self.blend(px.round() as i64, py.round() as i64, c, 1.0);
+                (false, false) => {}
             }
         }
+        if out.is_empty() {
+            break;
+        }
     }
+    out
 }
 
-struct Mask {
-    w: usize,
-    h: usize,
-    a: Vec<bool>,
+/// A legend's entries, measured.
+struct Legend {
+    entries: Vec<(String, Rgb, f64, bool, bool)>,
+    text_w: i32,
+    line_h: i32,
 }
 
-impl OriginDimensions for Mask {
-    fn size(&self) -> Size {
-        Size::new(self.w as u32, self.h as u32)
+impl Legend {
+    const SAMPLE: f64 = 30.0;
+    const PAD: f64 = 8.0;
+
+    fn of<DB: DrawingBackend>(
+        area: &DrawingArea<DB, Shift>,
+        c: &Chart,
+        k: Scale,
+    ) -> Result<Option<Legend>> {
+        let entries: Vec<_> = c
+            .series
+            .iter()
+            .filter(|s| !s.label.is_empty())
+            .map(|s| {
+                (
+                    s.label.clone(),
+                    s.color,
+                    s.width,
+                    s.dashed,
+                    s.band_upper.is_some(),
+                )
+            })
+            .collect();
+        if entries.is_empty() || c.legend.is_none() {
+            return Ok(None);
+        }
+        let font = k.font(LEGEND_PX);
+        let mut text_w = 0;
+        for e in &entries {
+            let (w, _) = area.estimate_text_size(&e.0, &font).map_err(plot_err)?;
+            text_w = text_w.max(w as i32);
+        }
+        Ok(Some(Legend {
+            entries,
+            text_w,
+            line_h: k.px(LEGEND_PX * 1.35),
+        }))
     }
-}
 
-impl DrawTarget for Mask {
-    type Color = Rgb888;
-    type Error = std::convert::Infallible;
-    fn draw_iter<I: IntoIterator<Item = Pixel<Rgb888>>>(
-        &mut self,
-        pixels: I,
-    ) -> Result<(), Self::Error> {
-        for Pixel(p, _) in pixels {
-            if p.x >= 0 && p.y >= 0 && (p.x as usize) < self.w && (p.y as usize) < self.h {
-                self.a[p.y as usize * self.w + p.x as usize] = true;
+    /// Size of the box with one entry per row.
+    fn size(&self, k: Scale) -> (i32, i32) {
+        (
+            self.text_w + k.px(Self::SAMPLE + 3.0 * Self::PAD),
+            self.entries.len() as i32 * self.line_h + k.px(Self::PAD),
+        )
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        at: (i32, i32),
+        k: Scale,
+        columns: usize,
+    ) -> Result<()> {
+        let columns = columns.max(1);
+        let rows = self.entries.len().div_ceil(columns) as i32;
+        let col_w = self.text_w + k.px(Self::SAMPLE + 3.0 * Self::PAD);
+        let (w, h) = (col_w * columns as i32, rows * self.line_h + k.px(Self::PAD));
+        let (x0, y0) = at;
+        area.draw(&Rectangle::new(
+            [(x0, y0), (x0 + w, y0 + h)],
+            WHITE.mix(0.92).filled(),
+        ))
+        .map_err(plot_err)?;
+        area.draw(&Rectangle::new(
+            [(x0, y0), (x0 + w, y0 + h)],
+            RGBColor(160, 160, 160).stroke_width(k.upx(1.0)),
+        ))
+        .map_err(plot_err)?;
+        let font = k.font(LEGEND_PX).pos(Pos::new(HPos::Left, VPos::Center));
+        for (i, (label, c, width, dashed, band)) in self.entries.iter().enumerate() {
+            let (col, row) = ((i as i32) / rows, (i as i32) % rows);
+            let x = x0 + col * col_w + k.px(Self::PAD);
+            let y = y0 + k.px(Self::PAD / 2.0) + row * self.line_h + self.line_h / 2;
+            let len = k.px(Self::SAMPLE);
+            let style = color(*c).stroke_width(k.upx(*width));
+            if *band {
+                area.draw(&Rectangle::new(
+                    [(x, y - self.line_h / 3), (x + len, y + self.line_h / 3)],
+                    color(*c).filled(),
+                ))
+                .map_err(plot_err)?;
+            } else if *dashed {
+                let dash = len / 4;
+                for j in [0, 2] {
+                    area.draw(&PathElement::new(
+                        vec![
+                            (x + j * dash + dash / 4, y),
+                            (x + (j + 1) * dash + dash / 2, y),
+                        ],
+                        style,
+                    ))
+                    .map_err(plot_err)?;
+                }
+            } else {
+                area.draw(&PathElement::new(vec![(x, y), (x + len, y)], style))
+                    .map_err(plot_err)?;
             }
+            area.draw(&Text::new(
+                label.clone(),
+                (x + len + k.px(Self::PAD), y),
+                font.clone(),
+            ))
+            .map_err(plot_err)?;
         }
         Ok(())
     }
 }
 
-fn to_rgb(fig: &Figure, prims: &[Prim]) -> Vec<u8> {
-    let (w, h) = (fig.width as usize, fig.height as usize);
-    let mut r = Raster {
-        w,
-        h,
-        px: vec![[255.0; 3]; w * h],
-    };
-    for p in prims {
-        match p {
-            Prim::Polyline {
-                pts,
-                color,
-                width,
-                dashed,
-                clip,
-            } => {
-                if *dashed {
-                    for d in dash(pts, 8.0, 5.0) {
-                        r.polyline(&d, *color, *width, *clip);
+/// How many series points (sampled along each segment, in pixels) fall inside `rect`.
+fn points_inside(
+    c: &Chart,
+    to_px: &dyn Fn([f64; 2]) -> Option<(f64, f64)>,
+    rect: [f64; 4],
+) -> usize {
+    let inside =
+        |p: (f64, f64)| p.0 >= rect[0] && p.0 <= rect[2] && p.1 >= rect[1] && p.1 <= rect[3];
+    let mut n = 0;
+    for s in &c.series {
+        let mut lines = vec![&s.points];
+        if let Some(u) = &s.band_upper {
+            lines.push(u);
+        }
+        for pts in lines {
+            let px: Vec<Option<(f64, f64)>> = pts.iter().map(|p| to_px(*p)).collect();
+            for w in px.windows(2) {
+                if let (Some(a), Some(b)) = (w[0], w[1]) {
+                    let len = (b.0 - a.0).hypot(b.1 - a.1);
+                    let steps = (len / 3.0).ceil().clamp(1.0, 400.0) as usize;
+                    for i in 0..=steps {
+                        let t = i as f64 / steps as f64;
+                        n += usize::from(inside((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1))));
                     }
-                } else {
-                    r.polyline(pts, *color, *width, *clip);
+                } else if let Some(a) = w[0] {
+                    n += usize::from(inside(a));
                 }
             }
-            Prim::Text {
-                x,
-                y,
-                text,
-                color,
-                size,
-                anchor,
-                vertical,
-            } => r.text(*x, *y, text, (*color, *size, *anchor, *vertical)),
-            Prim::Rect {
-                r: rr,
-                fill,
-                stroke,
-            } => {
-                if let Some(f) = fill {
-                    for y in rr[1].round() as i64..(rr[1] + rr[3]).round() as i64 {
-                        for x in rr[0].round() as i64..(rr[0] + rr[2]).round() as i64 {
-                            r.blend(x, y, *f, 1.0);
+        }
+    }
+    n
+}
+
+/// Margins and label areas of a chart, in back-end pixels.
+struct ChartLayout {
+    top: i32,
+    right: i32,
+    bottom: i32,
+    left: i32,
+    x_area: i32,
+    y_area: i32,
+}
+
+impl ChartLayout {
+    fn new(k: Scale) -> ChartLayout {
+        ChartLayout {
+            top: k.px(6.0),
+            right: k.px(18.0),
+            bottom: k.px(4.0),
+            left: k.px(6.0),
+            x_area: k.px(TICK_PX + LABEL_PX + 16.0),
+            y_area: k.px(TICK_PX * 3.2 + LABEL_PX + 10.0),
+        }
+    }
+
+    /// The plot rectangle `[x0, y0, x1, y1]` inside an area of size `(w, h)`.
+    fn plot_rect(&self, w: i32, h: i32) -> [i32; 4] {
+        [
+            self.left + self.y_area,
+            self.top,
+            (w - self.right).max(self.left + self.y_area + 10),
+            (h - self.bottom - self.x_area).max(self.top + 10),
+        ]
+    }
+}
+
+fn draw_chart<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    k: Scale,
+) -> Result<()> {
+    let area = titled(area, &c.title, k)?;
+    let (w, h) = area.dim_in_pixel();
+    let (w, h) = (w as i32, h as i32);
+    let mut layout = ChartLayout::new(k);
+    let (mut xr, mut yr) = chart_ranges(c);
+    let space = AxisSpace { x_log: c.x_log };
+    let fit_aspect = |xr: &mut [f64; 2], yr: &mut [f64; 2], pr: [i32; 4]| {
+        if c.equal_aspect && !c.x_log {
+            let (pw, ph) = (f64::from(pr[2] - pr[0]), f64::from(pr[3] - pr[1]));
+            let sx = pw / (xr[1] - xr[0]);
+            let sy = ph / (yr[1] - yr[0]);
+            if sx > sy {
+                let need = pw / sy;
+                let mid = 0.5 * (xr[0] + xr[1]);
+                *xr = [mid - need / 2.0, mid + need / 2.0];
+            } else {
+                let need = ph / sx;
+                let mid = 0.5 * (yr[0] + yr[1]);
+                *yr = [mid - need / 2.0, mid + need / 2.0];
+            }
+        }
+    };
+    let (ax0, ax1) = (
+        space.to_axis([xr[0], 0.0])[0],
+        space.to_axis([xr[1], 0.0])[0],
+    );
+    // legend: the preferred corner if it covers no data, else another free corner, else
+    // below the chart
+    let legend = Legend::of(&area, c, k)?;
+    let mut legend_at: Option<((i32, i32), usize)> = None;
+    if let Some(lg) = &legend {
+        let pr = layout.plot_rect(w, h);
+        fit_aspect(&mut xr, &mut yr, pr);
+        let (lw, lh) = lg.size(k);
+        let m = k.px(8.0);
+        let pos = |corner: Corner| match corner {
+            Corner::TopLeft => (pr[0] + m, pr[1] + m),
+            Corner::TopRight => (pr[2] - m - lw, pr[1] + m),
+            Corner::BottomRight => (pr[2] - m - lw, pr[3] - m - lh),
+            Corner::BottomLeft => (pr[0] + m, pr[3] - m - lh),
+        };
+        let to_px = |p: [f64; 2]| -> Option<(f64, f64)> {
+            if !space.valid(p) {
+                return None;
+            }
+            let q = space.to_axis(p);
+            let x0 = (ax0, ax1);
+            let fx = (q[0] - x0.0) / (x0.1 - x0.0);
+            let fy = (q[1] - yr[0]) / (yr[1] - yr[0]);
+            Some((
+                f64::from(pr[0]) + fx * f64::from(pr[2] - pr[0]),
+                f64::from(pr[3]) - fy * f64::from(pr[3] - pr[1]),
+            ))
+        };
+        let mut order = vec![c.legend.unwrap_or(Corner::TopLeft)];
+        for corner in [
+            Corner::TopLeft,
+            Corner::TopRight,
+            Corner::BottomRight,
+            Corner::BottomLeft,
+        ] {
+            if !order.contains(&corner) {
+                order.push(corner);
+            }
+        }
+        let fits = lw < pr[2] - pr[0] - 2 * m && lh < pr[3] - pr[1] - 2 * m;
+        let pad = f64::from(k.px(3.0));
+        legend_at = order
+            .into_iter()
+            .map(pos)
+            .find(|&(x, y)| {
+                fits && points_inside(
+                    c,
+                    &to_px,
+                    [
+                        f64::from(x) - pad,
+                        f64::from(y) - pad,
+                        f64::from(x + lw) + pad,
+                        f64::from(y + lh) + pad,
+                    ],
+                ) == 0
+            })
+            .map(|p| (p, 1));
+        if legend_at.is_none() {
+            // below the chart, in as many columns as fit
+            let col_w = lw;
+            let columns = (((w - layout.left - layout.y_area) / col_w.max(1)) as usize)
+                .clamp(1, lg.entries.len());
+            let rows = lg.entries.len().div_ceil(columns) as i32;
+            let box_h = rows * lg.line_h + k.px(Legend::PAD);
+            layout.bottom += box_h + k.px(6.0);
+            let pr = layout.plot_rect(w, h);
+            let x = pr[0] + ((pr[2] - pr[0]) - col_w * columns as i32).max(0) / 2;
+            legend_at = Some(((x, h - layout.bottom + k.px(6.0)), columns));
+            // the plot area shrank: refit the aspect from the original ranges
+            let (x2, y2) = chart_ranges(c);
+            xr = x2;
+            yr = y2;
+            fit_aspect(&mut xr, &mut yr, pr);
+        }
+    } else {
+        fit_aspect(&mut xr, &mut yr, layout.plot_rect(w, h));
+    }
+    let mut builder = ChartBuilder::on(&area);
+    builder
+        .margin_top(layout.top)
+        .margin_right(layout.right)
+        .margin_bottom(layout.bottom)
+        .margin_left(layout.left)
+        .x_label_area_size(layout.x_area)
+        .y_label_area_size(layout.y_area);
+    let pr = layout.plot_rect(w, h);
+    let x_labels = ((f64::from(pr[2] - pr[0]) / f64::from(k.px(65.0))) as usize).clamp(2, 12);
+    let mut y_labels = ((f64::from(pr[3] - pr[1]) / f64::from(k.px(45.0))) as usize).clamp(2, 12);
+    if c.y_integer {
+        // fewer labels than whole numbers in the range: plotters' steps are then >= 1
+        y_labels = y_labels.min((yr[1] - yr[0]).floor().max(1.0) as usize + 1);
+    }
+    let log_ticks = c.x_log.then(|| LogTicks::new(xr, x_labels));
+    let ticks = Ticks {
+        x: x_labels,
+        y: y_labels,
+        x_format: if let Some(t) = &log_ticks {
+            t.format
+        } else {
+            TickFormat::linear(xr[1] - xr[0], x_labels)
+        },
+        y_format: if c.y_integer {
+            TickFormat { step: 1.0 }
+        } else {
+            TickFormat::linear(yr[1] - yr[0], y_labels)
+        },
+    };
+    let clip = [ax0, ax1, yr[0], yr[1]];
+    if let Some(t) = log_ticks {
+        let x_axis = (xr[0]..xr[1])
+            .log_scale()
+            .with_key_points(t.bold)
+            .with_light_points(t.light);
+        let mut chart = builder
+            .build_cartesian_2d(x_axis, yr[0]..yr[1])
+            .map_err(plot_err)?;
+        draw_chart_body(&mut chart, c, k, ticks, space, clip)?;
+    } else {
+        let mut chart = builder
+            .build_cartesian_2d(xr[0]..xr[1], yr[0]..yr[1])
+            .map_err(plot_err)?;
+        draw_chart_body(&mut chart, c, k, ticks, space, clip)?;
+    }
+    if let (Some(lg), Some((at, columns))) = (&legend, legend_at) {
+        lg.draw(&area, at, k, columns)?;
+    }
+    Ok(())
+}
+
+/// The ticks of a logarithmic axis: 1, 2 and 5 times the powers of ten in the range (or
+/// only the powers, or every n-th, when that is too many; 1 to 9 times them when that is too
+/// few); on a range shorter than a factor of about 3, evenly spaced ticks as on a linear
+/// axis, so that e'_s from 1 to 1.4 still has labelled ticks.
+struct LogTicks {
+    bold: Vec<f64>,
+    light: Vec<f64>,
+    format: TickFormat,
+}
+
+impl LogTicks {
+    fn new(range: [f64; 2], max_labels: usize) -> LogTicks {
+        let [lo, hi] = range;
+        let max_labels = max_labels.max(2);
+        let inside = |v: &f64| *v >= lo * (1.0 - 1e-9) && *v <= hi * (1.0 + 1e-9);
+        let multiples = |m: &[f64]| -> Vec<f64> {
+            let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+            (k0..=k1)
+                .flat_map(|k| m.iter().map(move |m| m * 10f64.powi(k)))
+                .filter(inside)
+                .collect()
+        };
+        let all = multiples(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+        let mut bold = multiples(&[1.0, 2.0, 5.0]);
+        if bold.len() > max_labels {
+            let decades = multiples(&[1.0]);
+            let every = decades.len().div_ceil(max_labels).max(1);
+            bold = decades.into_iter().step_by(every).collect();
+        } else if bold.len() < 3 {
+            bold = all.clone();
+        }
+        if bold.len() >= 3 && bold.len() <= max_labels {
+            return LogTicks {
+                bold,
+                light: all,
+                format: TickFormat::LOG,
+            };
+        }
+        // a short range: evenly spaced, 1, 2 or 5 times a power of ten apart
+        let raw = (hi - lo) / max_labels.min(8) as f64;
+        let p = 10f64.powf(raw.log10().floor());
+        let step = [1.0, 2.0, 5.0, 10.0]
+            .into_iter()
+            .map(|m| m * p)
+            .find(|s| *s >= raw)
+            .unwrap_or(10.0 * p);
+        let first = (lo / step).ceil() as i64;
+        let last = (hi / step).floor() as i64;
+        let bold: Vec<f64> = (first..=last).map(|i| i as f64 * step).collect();
+        let light = (first * 5 - 5..=last * 5 + 5)
+            .map(|i| i as f64 * step / 5.0)
+            .filter(inside)
+            .collect();
+        LogTicks {
+            bold,
+            light,
+            format: TickFormat { step },
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Ticks {
+    x: usize,
+    y: usize,
+    x_format: TickFormat,
+    y_format: TickFormat,
+}
+
+fn draw_chart_body<DB, X>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, RangedCoordf64>>,
+    c: &Chart,
+    k: Scale,
+    ticks: Ticks,
+    space: AxisSpace,
+    clip: [f64; 4],
+) -> Result<()>
+where
+    DB: DrawingBackend,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_labels(ticks.x)
+        .y_labels(ticks.y)
+        .x_label_formatter(&|v| ticks.x_format.format(*v))
+        .y_label_formatter(&|v| ticks.y_format.format(*v))
+        .x_desc(c.x_label.as_str())
+        .y_desc(c.y_label.as_str())
+        .label_style(k.font(TICK_PX))
+        .axis_desc_style(k.font(LABEL_PX))
+        .bold_line_style(RGBColor(215, 215, 215).stroke_width(k.upx(1.0)))
+        .light_line_style(RGBColor(242, 242, 242).stroke_width(k.upx(1.0)))
+        .axis_style(BLACK.stroke_width(k.upx(1.0)))
+        .set_all_tick_mark_size(k.px(4.0))
+        .draw()
+        .map_err(plot_err)?;
+    for s in &c.series {
+        if let Some(upper) = &s.band_upper {
+            let poly: Vec<[f64; 2]> = s
+                .points
+                .iter()
+                .chain(upper.iter().rev())
+                .filter(|p| space.valid(**p))
+                .map(|p| space.to_axis(*p))
+                .collect();
+            let poly = clip_polygon(poly, clip);
+            if poly.len() >= 3 {
+                let pts: Vec<(f64, f64)> = poly
+                    .iter()
+                    .map(|p| {
+                        let d = space.to_data(*p);
+                        (d[0], d[1])
+                    })
+                    .collect();
+                chart
+                    .draw_series(std::iter::once(Polygon::new(pts, color(s.color).filled())))
+                    .map_err(plot_err)?;
+            }
+            continue;
+        }
+        let style = color(s.color).stroke_width(k.upx(s.width));
+        for run in visible_runs(&s.points, space, clip) {
+            if s.dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(run, k.px(9.0), k.px(5.0), style))
+                    .map_err(plot_err)?;
+            } else {
+                chart
+                    .draw_series(LineSeries::new(run, style))
+                    .map_err(plot_err)?;
+            }
+        }
+    }
+    // frame the plot area
+    let (xs, ys) = (chart.x_range(), chart.y_range());
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(xs.start, ys.start), (xs.end, ys.end)],
+            BLACK.stroke_width(k.upx(1.0)),
+        )))
+        .map_err(plot_err)?;
+    Ok(())
+}
+
+// ------------------------------------------------------------------------------- heat maps
+
+/// Cells on the longest side of a heat map in SVG files (rectangles, not a raster).
+const SVG_HEATMAP_CELLS: usize = 120;
+
+fn heat_color(h: &Heatmap, v: f32) -> Rgb {
+    let span = (h.range[1] - h.range[0]).max(1e-12);
+    if v.is_finite() {
+        colormap((v - h.range[0]) / span)
+    } else {
+        [128, 128, 128]
+    }
+}
+
+fn draw_heatmap<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    h: &Heatmap,
+    k: Scale,
+    vector: bool,
+) -> Result<()> {
+    let area = titled(area, &h.title, k)?;
+    let (aw, ah) = area.dim_in_pixel();
+    let (aw, ah) = (aw as i32, ah as i32);
+    let (fw, fh) = (h.width.max(1), h.height.max(1));
+    let layout = ChartLayout::new(k);
+    // the colour bar's ticks and their widest label
+    let (r0, r1) = (f64::from(h.range[0]), f64::from(h.range[1]));
+    let r1 = if r1 > r0 { r1 } else { r0 + 1e-12 };
+    let bar_axis: RangedCoordf64 = (r0..r1).into();
+    let bar_labels = ((f64::from(ah) / f64::from(k.px(60.0))) as usize).clamp(2, 8);
+    let bar_format = TickFormat::linear(r1 - r0, bar_labels);
+    let bar_ticks: Vec<(f64, String)> = bar_axis
+        .key_points(bar_labels)
+        .into_iter()
+        .map(|v| (v, bar_format.format(v)))
+        .collect();
+    let tick_font = k.font(TICK_PX).pos(Pos::new(HPos::Left, VPos::Center));
+    let mut tick_w = 0;
+    for (_, t) in &bar_ticks {
+        tick_w = tick_w.max(area.estimate_text_size(t, &tick_font).map_err(plot_err)?.0 as i32);
+    }
+    let (gap, bar_w, tick_len) = (k.px(14.0), k.px(16.0), k.px(4.0));
+    let bar_total = gap + bar_w + tick_len + k.px(4.0) + tick_w + k.px(10.0) + k.px(LABEL_PX);
+    // the largest map of the field's aspect that fits beside its axes and the colour bar
+    let avail_w = aw - layout.left - layout.y_area - layout.right - bar_total;
+    let avail_h = ah - layout.top - layout.bottom - layout.x_area;
+    let scale = (f64::from(avail_w) / fw as f64)
+        .min(f64::from(avail_h) / fh as f64)
+        .max(1e-6);
+    let (iw, ih) = (
+        ((fw as f64 * scale).round() as i32).max(1),
+        ((fh as f64 * scale).round() as i32).max(1),
+    );
+    // centre map and colour bar together
+    let x0 = ((aw - (layout.y_area + iw + bar_total)) / 2).max(0);
+    let sub = area.clone().shrink(
+        (x0, layout.top),
+        ((layout.y_area + iw) as u32, (ih + layout.x_area) as u32),
+    );
+    let mut chart = ChartBuilder::on(&sub)
+        .x_label_area_size(layout.x_area)
+        .y_label_area_size(layout.y_area)
+        // rows grow downwards: the y axis shows -y
+        .build_cartesian_2d(0f64..fw as f64, -(fh as f64)..0f64)
+        .map_err(plot_err)?;
+    let labels = |px: i32| ((f64::from(px) / f64::from(k.px(70.0))) as usize).clamp(2, 10);
+    let (x_format, y_format) = (
+        TickFormat::linear(fw as f64, labels(iw)),
+        TickFormat::linear(fh as f64, labels(ih)),
+    );
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_labels(labels(iw))
+        .y_labels(labels(ih))
+        .x_label_formatter(&|v| x_format.format(*v))
+        .y_label_formatter(&|v| y_format.format(-*v))
+        .x_desc("x (pixels)")
+        .y_desc("y (pixels)")
+        .label_style(k.font(TICK_PX))
+        .axis_desc_style(k.font(LABEL_PX))
+        .axis_style(BLACK.stroke_width(k.upx(1.0)))
+        .set_all_tick_mark_size(k.px(4.0))
+        .draw()
+        .map_err(plot_err)?;
+    if vector {
+        // a coarse grid of rectangles, each the mean of its block
+        let block = fw.max(fh).div_ceil(SVG_HEATMAP_CELLS).max(1);
+        let mut cells = Vec::new();
+        for by in (0..fh).step_by(block) {
+            for bx in (0..fw).step_by(block) {
+                let (mut sum, mut n) = (0.0f64, 0usize);
+                for y in by..(by + block).min(fh) {
+                    for x in bx..(bx + block).min(fw) {
+                        let v = h.values.get(y * fw + x).copied().unwrap_or(f32::NAN);
+                        if v.is_finite() {
+                            sum += f64::from(v);
+                            n += 1;
                         }
                     }
                 }
-                if let Some(s) = stroke {
-                    let (x0, y0) = (rr[0].round() + 0.5, rr[1].round() + 0.5);
-                    let (x1, y1) = ((rr[0] + rr[2]).round() - 0.5, (rr[1] + rr[3]).round() - 0.5);
-                    let all = [0.0, 0.0, w as f64, h as f64];
-                    r.polyline(
-                        &[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]],
-                        *s,
-                        1.0,
-                        all,
-                    );
-                }
+                let v = if n > 0 {
+                    (sum / n as f64) as f32
+                } else {
+                    f32::NAN
+                };
+                let (xa, xb) = (bx as f64, (bx + block).min(fw) as f64);
+                let (ya, yb) = (-(by as f64), -((by + block).min(fh) as f64));
+                cells.push(Rectangle::new(
+                    [(xa, ya), (xb, yb)],
+                    color(heat_color(h, v)).filled(),
+                ));
             }
-            Prim::Image {
-                r: rr,
-                w: iw,
-                h: ih,
-                rgb,
-            } => {
-                let (x0, y0) = (rr[0].round() as i64, rr[1].round() as i64);
-                let (ow, oh) = (rr[2].round().max(1.0) as i64, rr[3].round().max(1.0) as i64);
-                for y in 0..oh {
-                    for x in 0..ow {
-                        let sx = ((x as f64 + 0.5) / ow as f64 * *iw as f64) as usize;
-                        let sy = ((y as f64 + 0.5) / oh as f64 * *ih as f64) as usize;
-                        let i = (sy.min(ih - 1) * iw + sx.min(iw - 1)) * 3;
-                        r.blend(x0 + x, y0 + y, [rgb[i], rgb[i + 1], rgb[i + 2]], 1.0);
-                    }
-                }
+        }
+        chart.draw_series(cells).map_err(plot_err)?;
+    } else {
+        // one sample per back-end pixel (nearest), blitted as a bitmap
+        let (pw, ph) = (iw as usize, ih as usize);
+        let mut rgb = Vec::with_capacity(pw * ph * 3);
+        for y in 0..ph {
+            let sy = (((y as f64 + 0.5) / ph as f64 * fh as f64) as usize).min(fh - 1);
+            for x in 0..pw {
+                let sx = (((x as f64 + 0.5) / pw as f64 * fw as f64) as usize).min(fw - 1);
+                let v = h.values.get(sy * fw + sx).copied().unwrap_or(f32::NAN);
+                rgb.extend_from_slice(&heat_color(h, v));
             }
+        }
+        if let Some(img) = BitMapElement::with_owned_buffer((0.0, 0.0), (pw as u32, ph as u32), rgb)
+        {
+            chart.plotting_area().draw(&img).map_err(plot_err)?;
         }
     }
-    r.px.iter()
-        .flat_map(|p| p.map(|v| v.round().clamp(0.0, 255.0) as u8))
-        .collect()
-}
-
-/// Writes the figure as PNG or SVG by the extension of `path` (atomically).
-pub fn save(fig: &Figure, path: &Path) -> Result<()> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let prims = layout(fig);
-    match ext.as_str() {
-        "svg" => {
-            let svg = to_svg(fig, &prims)?;
-            dataset_io::write_atomic(path, svg.as_bytes())?;
-        }
-        "png" => {
-            let rgb = to_rgb(fig, &prims);
-            dataset_io::write_png_u8(
-                path,
-                fig.width as usize,
-                fig.height as usize,
-                3,
-                &rgb,
-                dataset_io::PngSpeed::Default,
-            )?;
-        }
-        _ => bail!(
-            "{}: unknown plot format `.{ext}`, use .png or .svg",
-            path.display()
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(0.0, 0.0), (fw as f64, -(fh as f64))],
+            BLACK.stroke_width(k.upx(1.0)),
+        )))
+        .map_err(plot_err)?;
+    // colour bar to the right of the map
+    let bx = x0 + layout.y_area + iw + gap;
+    let (by0, by1) = (layout.top, layout.top + ih);
+    let steps = 128;
+    for i in 0..steps {
+        let t0 = i as f64 / steps as f64;
+        let t1 = (i + 1) as f64 / steps as f64;
+        let y_top = by1 - ((t1 * f64::from(ih)).round() as i32);
+        let y_bot = by1 - ((t0 * f64::from(ih)).round() as i32);
+        area.draw(&Rectangle::new(
+            [(bx, y_top), (bx + bar_w, y_bot)],
+            color(colormap(((t0 + t1) / 2.0) as f32)).filled(),
+        ))
+        .map_err(plot_err)?;
+    }
+    area.draw(&Rectangle::new(
+        [(bx, by0), (bx + bar_w, by1)],
+        BLACK.stroke_width(k.upx(1.0)),
+    ))
+    .map_err(plot_err)?;
+    for (v, text) in bar_ticks {
+        let y = by1 - (((v - r0) / (r1 - r0)) * f64::from(ih)).round() as i32;
+        area.draw(&PathElement::new(
+            vec![(bx + bar_w, y), (bx + bar_w + tick_len, y)],
+            BLACK.stroke_width(k.upx(1.0)),
+        ))
+        .map_err(plot_err)?;
+        area.draw(&Text::new(
+            text,
+            (bx + bar_w + tick_len + k.px(4.0), y),
+            tick_font.clone(),
+        ))
+        .map_err(plot_err)?;
+    }
+    let label_font = k
+        .font(LABEL_PX)
+        .transform(FontTransform::Rotate270)
+        .pos(Pos::new(HPos::Center, VPos::Top));
+    area.draw(&Text::new(
+        h.label.clone(),
+        (
+            bx + bar_w + tick_len + k.px(4.0) + tick_w + k.px(10.0),
+            (by0 + by1) / 2,
         ),
-    }
+        label_font,
+    ))
+    .map_err(plot_err)?;
     Ok(())
 }
 
@@ -1087,51 +1457,144 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ticks_are_nice_and_cover_the_range() {
+    fn tick_labels_are_compact() {
+        let log = TickFormat::LOG;
+        assert_eq!(log.format(0.25), "0.25");
+        assert_eq!(log.format(1000.0), "1000");
+        assert_eq!(log.format(0.0), "0");
+        assert_eq!(log.format(2e-5), "2e-5");
+        assert_eq!(log.format(0.1), "0.1");
+        // the spacing decides the decimals: 0.0015 is not rounded to 0.002
+        let fine = TickFormat::linear(0.0016, 8);
+        assert_eq!(fine.format(0.0015), "0.0015");
+        assert_eq!(fine.format(0.001), "0.001");
+        let coarse = TickFormat::linear(500.0, 10);
+        assert_eq!(coarse.format(250.0), "250");
         assert_eq!(
-            linear_ticks(0.0, 10.0, 5),
-            vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
+            TickFormat::linear(3.0, 10).format(0.30000000000000004),
+            "0.3"
         );
-        assert_eq!(log_ticks(0.5, 3000.0), vec![1.0, 10.0, 100.0, 1000.0]);
+        assert_eq!(TickFormat::linear(6.0, 12).format(2.5), "2.5");
+        assert_eq!(TickFormat::linear(2e-5, 4).format(1.5e-5), "1.5e-5");
+        assert_eq!(TickFormat::linear(2.0, 4).format(-1e-17), "0");
+    }
+
+    #[test]
+    fn log_axes_have_enough_labelled_ticks() {
+        // several decades: 1, 2, 5 times the powers of ten
+        let labels =
+            |t: &LogTicks| -> Vec<String> { t.bold.iter().map(|v| t.format.format(*v)).collect() };
+        let t = LogTicks::new([0.02, 30.0], 12);
         assert_eq!(
-            log_ticks(1.0, 100.0),
-            vec![1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0]
+            labels(&t),
+            ["0.02", "0.05", "0.1", "0.2", "0.5", "1", "2", "5", "10", "20"]
         );
-        assert_eq!(log_ticks(1.0, 2.5), vec![1.0, 1.2, 1.5, 2.0]);
-        assert_eq!(fmt_tick(0.25), "0.25");
-        assert_eq!(fmt_tick(1000.0), "1000");
+        assert!(t.light.len() > t.bold.len());
+        // too many for the space: every other power of ten
+        let t = LogTicks::new([1e-3, 1e3], 5);
+        assert_eq!(labels(&t), ["0.001", "0.1", "10", "1000"]);
+        // e'_s from 1 to 3: 1, 2, 3
+        assert_eq!(labels(&LogTicks::new([1.0, 3.2], 10)), ["1", "2", "3"]);
+        // a short range: evenly spaced labels with the decimals they need
+        let t = LogTicks::new([1.0, 1.4], 10);
+        let l = labels(&t);
+        assert!(l.len() >= 4 && l[0] == "1", "{l:?}");
+        for (text, v) in l.iter().zip(&t.bold) {
+            let back: f64 = text.parse().unwrap();
+            assert!((back - v).abs() < 1e-9, "{l:?}");
+        }
     }
 
     #[test]
-    fn base64_matches_rfc4648_vectors() {
-        assert_eq!(base64(b""), "");
-        assert_eq!(base64(b"f"), "Zg==");
-        assert_eq!(base64(b"fo"), "Zm8=");
-        assert_eq!(base64(b"foobar"), "Zm9vYmFy");
+    fn segments_and_polygons_are_clipped_to_the_plot() {
+        let r = [0.0, 10.0, 0.0, 10.0];
+        let (a, b) = clip_segment([-5.0, 5.0], [15.0, 5.0], r).unwrap();
+        assert_eq!((a, b), ([0.0, 5.0], [10.0, 5.0]));
+        assert!(clip_segment([-5.0, -5.0], [-1.0, 20.0], r).is_none());
+        let runs = visible_runs(
+            &[
+                [1.0, 1.0],
+                [5.0, 20.0],
+                [9.0, 1.0],
+                [f64::NAN, 0.0],
+                [2.0, 2.0],
+                [3.0, 3.0],
+            ],
+            AxisSpace { x_log: false },
+            r,
+        );
+        assert_eq!(runs.len(), 3, "{runs:?}");
+        assert!(runs.iter().flatten().all(|p| p.1 <= 10.0 + 1e-12));
+        let poly = clip_polygon(vec![[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0]], r);
+        let area: f64 = (0..poly.len())
+            .map(|i| {
+                let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+                p[0] * q[1] - q[0] * p[1]
+            })
+            .sum::<f64>()
+            / 2.0;
+        assert!((area.abs() - 25.0).abs() < 1e-9, "{poly:?}");
     }
 
     #[test]
-    fn dashes_alternate() {
-        let d = dash(&[[0.0, 0.0], [30.0, 0.0]], 8.0, 5.0);
-        assert_eq!(d.len(), 3);
-        assert!((d[0][1][0] - 8.0).abs() < 1e-9);
-        assert!((d[1][0][0] - 13.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn raster_draws_lines_and_text() {
-        let mut c = Chart::new("t", "x", "y");
+    fn png_has_anti_aliased_lines_and_text_and_svg_is_scaled() {
+        let mut c = Chart::new("title", "x (m)", "y (m)");
         c.series
             .push(Series::line("a", vec![[0.0, 0.0], [1.0, 1.0]], PALETTE[0]));
-        let fig = Figure::single(c, 200, 150);
-        let rgb = to_rgb(&fig, &layout(&fig));
-        assert_eq!(rgb.len(), 200 * 150 * 3);
+        let fig = Figure::single(c, 300, 200);
+        let rgb = render_rgb(&fig).unwrap();
+        assert_eq!(rgb.len(), 300 * 200 * 3);
         let blue = rgb.chunks(3).filter(|p| p[2] > 150 && p[0] < 100).count();
         assert!(blue > 50, "{blue}");
-        let dark = rgb
-            .chunks(3)
-            .filter(|p| p[0] < 60 && p[1] < 60 && p[2] < 60)
-            .count();
+        let dark = rgb.chunks(3).filter(|p| p.iter().all(|&v| v < 60)).count();
         assert!(dark > 100, "{dark}");
+        // grey levels between black and white: the edges are smoothed
+        let mid = rgb
+            .chunks(3)
+            .filter(|p| p[0] == p[1] && p[1] == p[2] && (80..200).contains(&p[0]))
+            .count();
+        assert!(mid > 30, "{mid}");
+        let svg = render_svg(&fig).unwrap();
+        assert!(
+            svg.contains(r#"width="300" height="200" viewBox="0 0 600 400""#),
+            "{}",
+            &svg[..200]
+        );
+        assert!(svg.contains("DejaVu Sans"));
+    }
+
+    #[test]
+    fn save_names_a_wrong_extension() {
+        let fig = Figure::single(Chart::new("t", "x", "y"), 100, 80);
+        let dir = std::env::temp_dir();
+        let e = save(&fig, &dir.join("monovo_plot_test.jpeg")).unwrap_err();
+        assert!(
+            e.to_string().contains("`.jpeg`") && e.to_string().contains(".png or .svg"),
+            "{e}"
+        );
+        let e = save(&fig, &dir.join("monovo_plot_test_xplot")).unwrap_err();
+        assert!(e.to_string().contains("no extension"), "{e}");
+    }
+
+    #[test]
+    fn the_legend_moves_off_the_data() {
+        // a line through the top-left corner: the legend must not sit there
+        let mut c = Chart::new("t", "x", "y");
+        let pts: Vec<[f64; 2]> = (0..=100).map(|i| [i as f64, 100.0 - i as f64]).collect();
+        c.series.push(Series::line("falling", pts, PALETTE[1]));
+        c.legend = Some(Corner::TopLeft);
+        let fig = Figure::single(c, 400, 300);
+        let rgb = render_rgb(&fig).unwrap();
+        // the legend box is white-ish with a grey frame; the red line passes the top-left
+        // of the plot and the legend text must be elsewhere: look for red pixels in the
+        // top-left quarter (the line is visible there, not covered)
+        let red_top_left = (40..140)
+            .flat_map(|y| (70..170).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = &rgb[(y * 400 + x) * 3..(y * 400 + x) * 3 + 3];
+                p[0] > 150 && p[1] < 90
+            })
+            .count();
+        assert!(red_top_left > 50, "{red_top_left}");
     }
 }

@@ -52,7 +52,62 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
         .map(|k| (got.values()[k] - truth.values()[k]).abs())
         .fold(0.0, f64::max);
     assert!(max < 1.0, "max error {max}");
-    assert!(std::fs::read_to_string(&plot).unwrap().contains("<svg"));
+    crate::figures::check_svg(
+        &plot,
+        1650,
+        520,
+        &[
+            "inverse response U",
+            "grey value I",
+            "U(I) (scaled to U(255) = 255)",
+            "log10 of the number of observations",
+            "U estimated",
+        ],
+    );
+
+    // options from --config, a flag over the file, and a bad file refused before any work
+    let config = d.join("calib.toml");
+    std::fs::write(
+        &config,
+        "[response]\nmax_iterations = 2\ntolerance = 1e-9\n",
+    )
+    .unwrap();
+    let iterations = |extra: &[&str]| {
+        let out = d.join("config_pcalib.txt");
+        let mut args = vec![
+            "calib",
+            "response",
+            sweep.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--force",
+            "--json",
+            "--config",
+            config.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = monovo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        v["iterations"].as_u64().unwrap()
+    };
+    assert_eq!(iterations(&[]), 2);
+    assert_eq!(iterations(&["--max-iterations", "1"]), 1);
+    std::fs::write(&config, "[response]\nmax_iterations = 2\nsmoothnes = 1\n").unwrap();
+    let bad_out = d.join("bad_config_pcalib.txt");
+    let o = monovo(&[
+        "calib",
+        "response",
+        sweep.to_str().unwrap(),
+        "-o",
+        bad_out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("calib.toml") && e.contains("smoothnes"), "{e}");
+    assert!(!bad_out.exists());
 
     // outputs are not replaced without --force, and nothing is computed before that check
     let o = monovo(&[
@@ -196,7 +251,7 @@ fn vignette_calibration_with_markers_and_with_poses() {
         assert!((scale - v["std_scale"].as_f64().unwrap()).abs() < 1e-9 * scale);
         assert!(scale > 0.0 && scale < 0.05, "{scale}");
         assert!(d.join(format!("{name}_coverage.png")).exists());
-        assert!(std::fs::metadata(&plot).unwrap().len() > 5000);
+        crate::figures::check_png(&plot, 1650, 900);
     }
 }
 
@@ -293,4 +348,60 @@ fn synth_and_calibrations_are_bit_identical_with_one_and_two_threads() {
         differ.is_empty(),
         "differ between 1 and 2 threads: {differ:?}"
     );
+}
+
+/// Options outside the values they can take, from --config or from a flag, are refused before
+/// any work (the sequence is not even opened), naming the option and the file.
+#[test]
+fn absurd_calibration_options_are_refused_before_any_work() {
+    let d = temp_dir("calib_options");
+    let missing = d.join("no-such-sequence");
+    let missing = missing.to_str().unwrap();
+    for (what, config, flag, name) in [
+        ("vignette", "[vignette]\ngrid = 100000\n", None, "grid"),
+        (
+            "vignette",
+            "[vignette]\nsmoothing_px = 1e300\n",
+            None,
+            "smoothing_px",
+        ),
+        ("vignette", "[vignette]\nextent = 0.0\n", None, "extent"),
+        (
+            "response",
+            "[response]\nsaturation_border = 100000\n",
+            None,
+            "saturation_border",
+        ),
+        ("response", "", Some(["--tolerance", "nan"]), "tolerance"),
+        (
+            "response",
+            "[response]\ncensor_sigmas = inf\n",
+            None,
+            "censor_sigmas",
+        ),
+    ] {
+        let cfg = d.join("options.toml");
+        std::fs::write(&cfg, config).unwrap();
+        let out = d.join("out.png");
+        let mut args = vec![
+            "calib",
+            what,
+            missing,
+            "-o",
+            out.to_str().unwrap(),
+            "--config",
+            cfg.to_str().unwrap(),
+        ];
+        args.extend(flag.iter().flatten());
+        let o = monovo(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{what} {name}: {e}");
+        assert!(
+            e.contains(&format!("`{name}`"))
+                && e.contains("options.toml")
+                && !e.contains("no-such"),
+            "{what} {name}: {e}"
+        );
+        assert!(!out.exists());
+    }
 }

@@ -123,7 +123,7 @@ fn eval_plot_and_bad_input() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("2e9 - t"));
-    assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
+    crate::figures::check_png(&png, 1500, 560);
     let svg = d.join("align.svg");
     let o = monovo(&[
         "eval",
@@ -134,7 +134,30 @@ fn eval_plot_and_bad_input() {
         svg.to_str().unwrap(),
     ]);
     assert!(o.status.success());
-    assert!(std::fs::read_to_string(&svg).unwrap().contains("<polyline"));
+    crate::figures::check_svg(
+        &svg,
+        1500,
+        560,
+        &[
+            "top-down x (ground-truth length unit)",
+            "top-down y (ground-truth length unit)",
+            "start segment",
+            "aligned to start",
+        ],
+    );
+    // another extension is refused by name, and nothing is written
+    let jpg = d.join("align.jpg");
+    let o = monovo(&[
+        "eval",
+        run.to_str().unwrap(),
+        "--gt",
+        gt.to_str().unwrap(),
+        "--plot",
+        jpg.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains(".png or .svg"), "{}", stderr(&o));
+    assert!(!jpg.exists());
 
     let bad = d.join("bad.txt");
     write(&bad, "1 2 3 4 5 6 7 8\n1 2 three 4 5 6 7 8\n");
@@ -175,7 +198,7 @@ fn batch_csv_table_and_cumulative_plots() {
     assert!(stderr(&o).contains("notes.txt") && stderr(&o).contains("sequence_09"));
     let text = std::fs::read_to_string(&csv).unwrap();
     assert_eq!(text.lines().count(), 17);
-    assert!(text.starts_with("method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses\n"));
+    assert!(text.starts_with("method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses,reason\n"));
 
     for (metric, split, file) in [
         ("e_align", None, "a.png"),
@@ -197,7 +220,21 @@ fn batch_csv_table_and_cumulative_plots() {
         }
         let o = monovo(&args);
         assert!(o.status.success(), "{}", stderr(&o));
-        assert!(std::fs::metadata(&out).unwrap().len() > 2000);
+        if file.ends_with(".png") {
+            crate::figures::check_png(&out, 900, 600);
+        } else {
+            crate::figures::check_svg(
+                &out,
+                900,
+                600,
+                &[
+                    "number of runs",
+                    "scale drift e'_s = max(e_s, 1/e_s) (multiplier)",
+                    // e'_s from 1 upwards: the first tick is 1
+                    "1",
+                ],
+            );
+        }
     }
     let o = monovo(&["plot", "table", csv.to_str().unwrap()]);
     assert!(o.status.success());
@@ -272,4 +309,13 @@ fn batch_csv_table_and_cumulative_plots() {
     ]);
     assert!(o.status.success());
     assert!(stdout(&o).contains("17 runs"));
+    // the unreadable run is failed with its reason in the table, read back as written
+    let rows =
+        eval_metrics::parse_csv(&std::fs::read_to_string(d.join("r2.csv")).unwrap()).unwrap();
+    let bad = rows.iter().find(|r| r.key.run == 7).unwrap();
+    let reason = bad.failure.as_deref().unwrap();
+    assert!(
+        reason.contains("fwd_7.txt") && reason.contains("line 1"),
+        "{reason}"
+    );
 }

@@ -6,5 +6,6 @@ mod camera;
 mod common;
 mod eval;
 mod faults;
+mod figures;
 mod rectify;
 mod terminal;

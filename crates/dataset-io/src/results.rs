@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use crate::DatasetError;
 
 /// One run file of a results tree.
-#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
 pub struct RunFile {
     /// Method (first folder level).
     pub method: String,
@@ -22,7 +22,7 @@ pub struct RunFile {
 
 /// A scanned results tree: the run files, sorted, and everything that does not fit the
 /// layout (listed so that nothing is silently mixed in or dropped).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ResultsTree {
     /// Run files, sorted by method, sequence, direction and run.
     pub runs: Vec<RunFile>,

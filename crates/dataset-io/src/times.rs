@@ -9,7 +9,7 @@ use std::path::Path;
 use crate::DatasetError;
 
 /// One row of times.txt.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TimeRow {
     /// The image id as written (usually the file stem, `00000`).
     pub id: String,
@@ -20,7 +20,7 @@ pub struct TimeRow {
 }
 
 /// A parsed times.txt, with the notes about what was repaired.
-#[derive(Clone, Debug, PartialEq, Default)]
+#[derive(Clone, Debug, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Times {
     /// The rows, in file order.
     pub rows: Vec<TimeRow>,

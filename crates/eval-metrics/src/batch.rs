@@ -6,17 +6,20 @@ use std::fmt;
 use std::str::FromStr;
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::evaluate::{evaluate, FailReason, Metrics};
 use crate::trajectory::{GroundTruth, Trajectory};
 use crate::EvalError;
 
 /// Playback direction of a run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub enum Direction {
     /// Played forwards (`fwd`).
+    #[serde(rename = "fwd", alias = "forward", alias = "forwards")]
     Forward,
     /// Played backwards (`bwd`).
+    #[serde(rename = "bwd", alias = "backward", alias = "backwards")]
     Backward,
 }
 
@@ -48,7 +51,7 @@ impl FromStr for Direction {
 }
 
 /// Identifies one run of a batch.
-#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 pub struct RunKey {
     /// Method name (the results tree's first level).
     pub method: String,
@@ -61,11 +64,12 @@ pub struct RunKey {
 }
 
 /// One evaluated run, as stored in results.csv.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
     /// Which run.
     pub key: RunKey,
-    /// `None` when the run succeeded.
+    /// `None` when the run succeeded, else why it failed (empty when a results.csv without
+    /// a `reason` column did not record why).
     pub failure: Option<String>,
     /// The metrics (infinite when failed).
     pub metrics: Metrics,
@@ -81,21 +85,28 @@ impl RunRecord {
 }
 
 /// A metric to summarise or plot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Metric {
     /// `e_align`.
+    #[serde(rename = "e_align")]
     EAlign,
     /// `e_r` in degrees.
+    #[serde(rename = "e_r")]
     ER,
     /// `e'_s = max(e_s, 1/e_s)` (the paper's summary of the scale drift).
+    #[serde(rename = "e_s")]
     ES,
     /// `e_t`.
+    #[serde(rename = "e_t")]
     ET,
     /// `e_rmse`.
+    #[serde(rename = "e_rmse")]
     ERmse,
     /// Start-segment RMSE.
+    #[serde(rename = "rmse_start")]
     RmseStart,
     /// End-segment RMSE.
+    #[serde(rename = "rmse_end")]
     RmseEnd,
 }
 
@@ -137,17 +148,23 @@ impl Metric {
         }
     }
 
-    /// Axis label for plots.
+    /// Axis label for plots, with the unit: degrees for `e_r`, a multiplier for `e'_s`, and
+    /// the ground truth's length unit for the others.
     pub fn label(self) -> &'static str {
         match self {
-            Metric::EAlign => "alignment error e_align",
+            Metric::EAlign => "alignment error e_align (ground-truth length unit)",
             Metric::ER => "rotation drift e_r (degrees)",
             Metric::ES => "scale drift e'_s = max(e_s, 1/e_s) (multiplier)",
-            Metric::ET => "translation drift e_t",
-            Metric::ERmse => "joint alignment RMSE e_rmse",
-            Metric::RmseStart => "start-segment RMSE",
-            Metric::RmseEnd => "end-segment RMSE",
+            Metric::ET => "translation drift e_t (ground-truth length unit)",
+            Metric::ERmse => "joint alignment RMSE e_rmse (ground-truth length unit)",
+            Metric::RmseStart => "start-segment RMSE (ground-truth length unit)",
+            Metric::RmseEnd => "end-segment RMSE (ground-truth length unit)",
         }
+    }
+
+    /// Whether the metric is a multiplier that is at least 1 (`e'_s`): its axis starts at 1.
+    pub fn is_multiplier(self) -> bool {
+        self == Metric::ES
     }
 }
 
@@ -199,8 +216,10 @@ where
                 }
                 None => RunRecord {
                     failure: Some(
-                        FailReason::Other(format!("no ground truth for {}", key.sequence))
-                            .to_string(),
+                        FailReason::Other {
+                            message: format!("no ground truth for {}", key.sequence),
+                        }
+                        .to_string(),
                     ),
                     metrics: Metrics::FAILED,
                     poses: traj.poses.len(),
@@ -213,165 +232,185 @@ where
         .collect()
 }
 
-/// The header of results.csv.
-pub const CSV_HEADER: &str =
-    "method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses";
+/// The header of results.csv: one row per run; `reason` says why a failed run failed.
+pub const CSV_HEADER: &str = "method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses,reason";
 
-fn csv_num(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v}")
-    } else {
-        "inf".into()
+/// Whether a run succeeded, as results.csv writes it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Status {
+    Ok,
+    Failed,
+}
+
+/// One row of results.csv (columns by name, so any order reads; unknown columns are
+/// ignored). Metrics are written at full precision, infinities as `inf`.
+#[derive(Debug, Serialize, Deserialize)]
+struct CsvRow {
+    method: String,
+    sequence: String,
+    direction: Direction,
+    run: u32,
+    status: Status,
+    #[serde(with = "csv_float")]
+    e_align: f64,
+    #[serde(with = "csv_float")]
+    e_s: f64,
+    #[serde(with = "csv_float")]
+    e_r: f64,
+    #[serde(with = "csv_float")]
+    e_t: f64,
+    #[serde(with = "csv_float")]
+    e_rmse: f64,
+    #[serde(with = "csv_float")]
+    rmse_start: f64,
+    #[serde(with = "csv_float")]
+    rmse_end: f64,
+    poses: usize,
+    #[serde(default)]
+    reason: String,
+}
+
+/// Floats as text: shortest round-trip form, `inf`/`-inf`/`NaN` for the others.
+mod csv_float {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_str(&format!("{v}"))
+        } else if v.is_nan() {
+            s.serialize_str("NaN")
+        } else if *v > 0.0 {
+            s.serialize_str("inf")
+        } else {
+            s.serialize_str("-inf")
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        let text = <std::borrow::Cow<'de, str>>::deserialize(d)?;
+        text.trim()
+            .parse::<f64>()
+            .map_err(|_| serde::de::Error::custom(format!("`{text}` is not a number (or inf)")))
     }
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
+impl From<&RunRecord> for CsvRow {
+    fn from(r: &RunRecord) -> Self {
+        let m = &r.metrics;
+        CsvRow {
+            method: r.key.method.clone(),
+            sequence: r.key.sequence.clone(),
+            direction: r.key.direction,
+            run: r.key.run,
+            status: if r.is_ok() {
+                Status::Ok
+            } else {
+                Status::Failed
+            },
+            e_align: m.e_align,
+            e_s: m.e_s,
+            e_r: m.e_r,
+            e_t: m.e_t,
+            e_rmse: m.e_rmse,
+            rmse_start: m.rmse_start,
+            rmse_end: m.rmse_end,
+            poses: r.poses,
+            reason: r.failure.clone().unwrap_or_default(),
+        }
     }
 }
 
-/// Writes records as results.csv (infinite metrics as `inf`, full precision).
+impl From<CsvRow> for RunRecord {
+    fn from(r: CsvRow) -> Self {
+        RunRecord {
+            key: RunKey {
+                method: r.method,
+                sequence: r.sequence,
+                direction: r.direction,
+                run: r.run,
+            },
+            failure: match r.status {
+                Status::Ok => None,
+                Status::Failed => Some(r.reason),
+            },
+            metrics: Metrics {
+                e_align: r.e_align,
+                e_s: r.e_s,
+                e_r: r.e_r,
+                e_t: r.e_t,
+                e_rmse: r.e_rmse,
+                rmse_start: r.rmse_start,
+                rmse_end: r.rmse_end,
+            },
+            poses: r.poses,
+        }
+    }
+}
+
+fn csv_error(e: &csv::Error) -> EvalError {
+    EvalError::Csv {
+        line: e.position().map_or(0, |p| p.line()),
+        message: match e.kind() {
+            csv::ErrorKind::Deserialize { err, .. } => match err.field() {
+                Some(f) => format!("column {}: {}", f + 1, err.kind()),
+                None => err.kind().to_string(),
+            },
+            _ => e.to_string(),
+        },
+    }
+}
+
+/// Writes records as results.csv (RFC 4180 quoting, so commas, quotes and line breaks in
+/// names and reasons survive; metrics at full precision, infinities as `inf`).
 pub fn write_csv(records: &[RunRecord]) -> String {
+    let mut w = csv::WriterBuilder::new()
+        .has_headers(false)
+        .from_writer(Vec::with_capacity(records.len() * 160 + 128));
     let mut out = String::with_capacity(records.len() * 160 + 128);
     out.push_str(CSV_HEADER);
     out.push('\n');
     for r in records {
-        let m = &r.metrics;
-        out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            csv_field(&r.key.method),
-            csv_field(&r.key.sequence),
-            r.key.direction,
-            r.key.run,
-            if r.is_ok() { "ok" } else { "failed" },
-            csv_num(m.e_align),
-            csv_num(m.e_s),
-            csv_num(m.e_r),
-            csv_num(m.e_t),
-            csv_num(m.e_rmse),
-            csv_num(m.rmse_start),
-            csv_num(m.rmse_end),
-            r.poses
-        ));
+        // Writing to a Vec cannot fail, and every field serialises to text.
+        if let Err(e) = w.serialize(CsvRow::from(r)) {
+            unreachable!("serialising a results row to memory: {e}");
+        }
+    }
+    match w.into_inner() {
+        Ok(bytes) => out.push_str(&String::from_utf8_lossy(&bytes)),
+        Err(e) => unreachable!("flushing a results table to memory: {e}"),
     }
     out
 }
 
-fn split_csv_line(line: &str) -> Vec<String> {
-    let mut fields = Vec::new();
-    let mut cur = String::new();
-    let mut quoted = false;
-    let mut chars = line.chars().peekable();
-    while let Some(c) = chars.next() {
-        match (c, quoted) {
-            ('"', true) if chars.peek() == Some(&'"') => {
-                cur.push('"');
-                chars.next();
-            }
-            ('"', _) => quoted = !quoted,
-            (',', false) => fields.push(std::mem::take(&mut cur)),
-            _ => cur.push(c),
-        }
-    }
-    fields.push(cur);
-    fields
-}
-
-/// Reads results.csv as written by [`write_csv`] (columns in any order; the 13 named ones
-/// required).
+/// Reads results.csv as written by [`write_csv`]: columns by name in any order, the 13 of
+/// [`CSV_HEADER`] before `reason` required, `reason` optional (a failed run without one gets
+/// an empty reason, never an invented one). Errors name the line.
 pub fn parse_csv(text: &str) -> Result<Vec<RunRecord>, EvalError> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let Some((_, header)) = lines.next() else {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut rd = csv::ReaderBuilder::new()
+        .trim(csv::Trim::Headers)
+        .from_reader(text.as_bytes());
+    let headers = rd.headers().map_err(|e| csv_error(&e))?.clone();
+    let missing: Vec<&str> = CSV_HEADER
+        .split(',')
+        .filter(|c| *c != "reason" && !headers.iter().any(|h| h == *c))
+        .collect();
+    if !missing.is_empty() {
         return Err(EvalError::Parse {
             line: 1,
-            expected: "the results.csv header",
-            found: String::new(),
-        });
-    };
-    let names: Vec<String> = split_csv_line(header.trim())
-        .into_iter()
-        .map(|s| s.trim().to_string())
-        .collect();
-    let col = |name: &str| names.iter().position(|n| n == name);
-    let wanted: Vec<&str> = CSV_HEADER.split(',').collect();
-    let mut idx = Vec::with_capacity(wanted.len());
-    for w in &wanted {
-        idx.push(col(w).ok_or_else(|| EvalError::Parse {
-            line: 1,
-            expected: "a results.csv header naming method, sequence, direction, run, status, e_align, e_s, e_r, e_t, e_rmse, rmse_start, rmse_end, poses",
-            found: header.trim().to_string(),
-        })?);
-    }
-    let mut out = Vec::new();
-    for (i, line) in lines {
-        let no = i + 1;
-        let f = split_csv_line(line.trim());
-        let bad = |expected: &'static str| EvalError::Parse {
-            line: no,
-            expected,
-            found: line.trim().chars().take(120).collect(),
-        };
-        let get = |k: usize| f.get(idx[k]).map(|s| s.trim());
-        let num = |k: usize| -> Result<f64, EvalError> {
-            get(k)
-                .and_then(|s| s.parse::<f64>().ok())
-                .ok_or_else(|| bad("a number (or inf) in every metric column"))
-        };
-        let direction = get(2)
-            .and_then(|s| s.parse::<Direction>().ok())
-            .ok_or_else(|| bad("direction `fwd` or `bwd`"))?;
-        let run = get(3)
-            .and_then(|s| s.parse::<u32>().ok())
-            .ok_or_else(|| bad("a run number"))?;
-        let status = get(4).ok_or_else(|| bad("status `ok` or `failed`"))?;
-        let ok = match status {
-            "ok" => true,
-            "failed" => false,
-            _ => return Err(bad("status `ok` or `failed`")),
-        };
-        let metrics = Metrics {
-            e_align: num(5)?,
-            e_s: num(6)?,
-            e_r: num(7)?,
-            e_t: num(8)?,
-            e_rmse: num(9)?,
-            rmse_start: num(10)?,
-            rmse_end: num(11)?,
-        };
-        let metrics = if ok {
-            metrics
-        } else {
-            Metrics {
-                rmse_start: metrics.rmse_start,
-                ..Metrics::FAILED
-            }
-        };
-        out.push(RunRecord {
-            key: RunKey {
-                method: get(0).unwrap_or("").to_string(),
-                sequence: get(1).unwrap_or("").to_string(),
-                direction,
-                run,
-            },
-            failure: if ok { None } else { Some("failed".into()) },
-            metrics,
-            poses: get(12)
-                .and_then(|s| s.parse::<usize>().ok())
-                .ok_or_else(|| bad("a pose count"))?,
+            expected: "a results.csv header naming method, sequence, direction, run, status, e_align, e_s, e_r, e_t, e_rmse, rmse_start, rmse_end, poses (and reason)",
+            found: headers.iter().collect::<Vec<_>>().join(","),
         });
     }
-    Ok(out)
+    rd.deserialize::<CsvRow>()
+        .map(|row| row.map(RunRecord::from).map_err(|e| csv_error(&e)))
+        .collect()
 }
 
 /// Median, minimum and maximum of a set of values (infinities included, as the paper counts
 /// failed runs).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stat {
     /// Median (the mean of the two middle values for an even count).
     pub median: f64,
@@ -409,7 +448,7 @@ impl Stat {
 }
 
 /// Per-sequence summary of one method (and direction, when split).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SequenceSummary {
     /// Method.
     pub method: String,
@@ -463,7 +502,7 @@ pub fn summarize(records: &[RunRecord], split_direction: bool) -> Vec<SequenceSu
 
 /// A cumulative error curve: the sorted finite values of one metric over a set of runs, and
 /// the total number of runs (failed runs never reach the curve).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Cumulative {
     /// Curve label (method, and direction when split).
     pub label: String,
@@ -481,7 +520,8 @@ impl Cumulative {
 }
 
 /// Which runs go into one curve.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum DirectionFilter {
     /// Forwards and backwards together (the paper's default).
     Both,

@@ -3,8 +3,10 @@
 
 use std::fmt;
 
-use crate::linalg::{self, Vec3};
-use crate::sim3::{align_sim3, AlignFailure, Sim3};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::sim3::{align_sim3, rotation_angle, AlignFailure, Sim3};
 use crate::trajectory::{GroundTruth, Trajectory};
 
 /// Maximum time difference, in seconds, between an estimated pose and its ground-truth row.
@@ -18,7 +20,8 @@ pub const BACKWARDS_EPOCH: f64 = 2e9;
 pub const BACKWARDS_DETECT_GAP: f64 = 1000.0;
 
 /// Which segment a failure concerns.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Segment {
     /// The start segment (first half of the ground-truth rows).
     Start,
@@ -36,7 +39,8 @@ impl fmt::Display for Segment {
 }
 
 /// Why a run failed. A failed run is a result (all metrics infinite), not an error.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum FailReason {
     /// The estimate has no pose.
     Empty,
@@ -65,7 +69,10 @@ pub enum FailReason {
         segment: Segment,
     },
     /// Some other reason (for example an unreadable file in a batch run with keep-going).
-    Other(String),
+    Other {
+        /// The reason.
+        message: String,
+    },
 }
 
 impl fmt::Display for FailReason {
@@ -87,13 +94,13 @@ impl fmt::Display for FailReason {
                 f,
                 "{segment} segment poses are collinear or identical, the alignment is not determined"
             ),
-            FailReason::Other(s) => f.write_str(s),
+            FailReason::Other { message } => f.write_str(message),
         }
     }
 }
 
-/// The metrics of one run; infinite where the run failed.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The metrics of one run; infinite where the run failed (JSON writes infinities as `null`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// Alignment error: RMS over all estimated positions of the distance between the start-
     /// and the end-aligned trajectory.
@@ -135,7 +142,7 @@ impl Metrics {
 }
 
 /// The result of evaluating one run.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Evaluation {
     /// `None` when the run succeeded, else why it failed.
     pub failure: Option<FailReason>,
@@ -155,7 +162,7 @@ pub struct Evaluation {
     /// Whether the timestamps were mapped back from the `2e9 - t` convention.
     pub backwards_time_mapped: bool,
     /// Estimated positions sorted by (mapped) time, as evaluated.
-    pub positions: Vec<Vec3>,
+    pub positions: Vec<Vector3<f64>>,
     /// Their timestamps.
     pub times: Vec<f64>,
 }
@@ -191,6 +198,12 @@ fn segment_failure(f: AlignFailure, segment: Segment) -> FailReason {
     match f {
         AlignFailure::TooFew(count) => FailReason::TooFewPoses { segment, count },
         AlignFailure::Degenerate => FailReason::Degenerate { segment },
+        // evaluate() pairs every pose with a finite ground-truth row
+        other @ (AlignFailure::LengthMismatch { .. } | AlignFailure::NonFinite) => {
+            FailReason::Other {
+                message: format!("{segment} segment: {other}"),
+            }
+        }
     }
 }
 
@@ -208,7 +221,7 @@ pub fn evaluate(est: &Trajectory, gt: &GroundTruth) -> Evaluation {
     if let Some((index, p)) = est.poses.iter().enumerate().find(|(_, p)| !p.is_finite()) {
         return Evaluation::failed(FailReason::NonFinite { index, t: p.t }, n);
     }
-    let mut rows: Vec<(f64, Vec3)> = est.poses.iter().map(|p| (p.t, p.position)).collect();
+    let mut rows: Vec<(f64, Vector3<f64>)> = est.poses.iter().map(|p| (p.t, p.position)).collect();
     rows.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut mapped = false;
     if (rows[0].0 - gt.times()[0]).abs() > BACKWARDS_DETECT_GAP {
@@ -220,9 +233,10 @@ pub fn evaluate(est: &Trajectory, gt: &GroundTruth) -> Evaluation {
     }
     let (start_last, end_first) = gt.window_bounds();
     let gt_pos = gt.positions();
-    let mut start_pairs: (Vec<Vec3>, Vec<Vec3>) = (Vec::new(), Vec::new());
-    let mut end_pairs: (Vec<Vec3>, Vec<Vec3>) = (Vec::new(), Vec::new());
-    let mut joint_pairs: (Vec<Vec3>, Vec<Vec3>) = (Vec::new(), Vec::new());
+    type Pairs = (Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+    let mut start_pairs: Pairs = (Vec::new(), Vec::new());
+    let mut end_pairs: Pairs = (Vec::new(), Vec::new());
+    let mut joint_pairs: Pairs = (Vec::new(), Vec::new());
     for &(t, p) in &rows {
         let Some(j) = gt.associate(t, ASSOCIATION_TOLERANCE) else {
             let mut e = Evaluation::failed(FailReason::Unassociated { t }, n);
@@ -249,7 +263,7 @@ pub fn evaluate(est: &Trajectory, gt: &GroundTruth) -> Evaluation {
         }
     }
     let times: Vec<f64> = rows.iter().map(|r| r.0).collect();
-    let positions: Vec<Vec3> = rows.iter().map(|r| r.1).collect();
+    let positions: Vec<Vector3<f64>> = rows.iter().map(|r| r.1).collect();
     let mut result = Evaluation {
         failure: None,
         metrics: Metrics::FAILED,
@@ -281,21 +295,21 @@ pub fn evaluate(est: &Trajectory, gt: &GroundTruth) -> Evaluation {
     result.end = Some(end.transform);
     let (s, e) = (start.transform, end.transform);
     let drift = e.compose(&s.inverse());
-    let mut sq = 0.0;
-    for p in &result.positions {
-        let d = linalg::sub(s.apply(*p), e.apply(*p));
-        sq += linalg::dot(d, d);
-    }
+    let sq: f64 = result
+        .positions
+        .iter()
+        .map(|p| (s.apply(p) - e.apply(p)).norm_squared())
+        .sum();
     let e_align = (sq / n as f64).sqrt();
     // The joint alignment cannot fail when each segment aligned, except in contrived cases
     // (both segments on one line); then e_rmse stays infinite.
     let e_rmse = align_sim3(&joint_pairs.0, &joint_pairs.1).map_or(f64::INFINITY, |a| a.rmse);
-    let rel = linalg::mul(&e.rotation, &linalg::transpose(&s.rotation));
+    let rel = e.rotation * s.rotation.inverse();
     result.metrics = Metrics {
         e_align,
         e_s: s.scale / e.scale,
-        e_r: linalg::rotation_angle(&rel).to_degrees(),
-        e_t: linalg::norm(drift.translation),
+        e_r: rotation_angle(&rel).to_degrees(),
+        e_t: drift.translation.norm(),
         e_rmse,
         rmse_start: start.rmse,
         rmse_end: end.rmse,

@@ -9,6 +9,10 @@
 //! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`summary_table`], and the
 //!   results.csv format ([`write_csv`], [`parse_csv`]) for the paper's tables and plots.
 //!
+//! Geometry is [`nalgebra`]'s: positions are `Vector3<f64>`, [`Sim3`] converts to and from
+//! `Similarity3<f64>`, and [`Pose::world_from_camera`] gives an `Isometry3<f64>`. Every
+//! result and option type is `serde`-serialisable.
+//!
 //! # Example
 //!
 //! ```
@@ -33,10 +37,11 @@
 
 mod batch;
 mod evaluate;
-pub mod linalg;
 mod sim3;
 mod table;
 mod trajectory;
+
+pub use nalgebra;
 
 pub use batch::{
     cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
@@ -45,7 +50,7 @@ pub use batch::{
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
-pub use sim3::{align_sim3, AlignFailure, Alignment, Sim3};
+pub use sim3::{align_sim3, rotation_angle, AlignFailure, Alignment, Sim3};
 pub use table::{markdown_table, summary_table, TableStyle, TABLE_CAPTION};
 pub use trajectory::{
     detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,
@@ -100,6 +105,22 @@ pub enum EvalError {
     /// A ground truth without rows.
     #[error("the ground truth has no rows")]
     EmptyGroundTruth,
+    /// Ground-truth times and positions of different counts.
+    #[error("{times} ground-truth times but {positions} positions")]
+    RowCount {
+        /// Number of timestamps.
+        times: usize,
+        /// Number of positions.
+        positions: usize,
+    },
+    /// A results.csv that does not read (bad quoting, a wrong value in a column).
+    #[error("line {line}: {message}")]
+    Csv {
+        /// 1-based line number (0 when unknown).
+        line: u64,
+        /// What is wrong.
+        message: String,
+    },
     /// KITTI poses and timestamps of different counts.
     #[error("{poses} KITTI poses but {times} timestamps in the times file")]
     KittiCount {

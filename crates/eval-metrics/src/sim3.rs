@@ -1,46 +1,71 @@
 //! Similarity transforms and their least-squares fit to corresponding points (Umeyama).
 
-use crate::linalg::{self, Mat3, Vec3};
+use nalgebra::{
+    Matrix3, Rotation3, Similarity3, SymmetricEigen, Translation3, UnitQuaternion, Vector3,
+};
+use serde::{Deserialize, Serialize};
 
 /// A similarity transform `p -> scale * rotation * p + translation`.
 ///
-/// Named by what it maps, sophus style: `gt_from_est.apply(point_in_est)` gives the point in
-/// the ground-truth frame; transforms compose right to left.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Named by what it maps, sophus style: `gt_from_est.apply(&point_in_est)` gives the point in
+/// the ground-truth frame; transforms compose right to left. Converts to and from
+/// [`nalgebra::Similarity3`] (which applies the scale first, then the rotation and the
+/// translation: the same map).
+///
+/// ```
+/// use eval_metrics::Sim3;
+/// use nalgebra::{Rotation3, Similarity3, Vector3};
+///
+/// let s = Sim3 {
+///     scale: 2.0,
+///     rotation: Rotation3::from_axis_angle(&Vector3::z_axis(), 0.5),
+///     translation: Vector3::new(1.0, 2.0, 3.0),
+/// };
+/// let p = Vector3::new(0.3, -0.4, 0.5);
+/// let n: Similarity3<f64> = s.into();
+/// assert!((n.transform_point(&p.into()).coords - s.apply(&p)).norm() < 1e-12);
+/// assert!((Sim3::from(n).rotation_angle_deg() - 0.5f64.to_degrees()).abs() < 1e-9);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Sim3 {
     /// Scale factor (positive).
     pub scale: f64,
-    /// Rotation matrix (row-major).
-    pub rotation: Mat3,
+    /// Rotation.
+    pub rotation: Rotation3<f64>,
     /// Translation.
-    pub translation: Vec3,
+    pub translation: Vector3<f64>,
+}
+
+impl Default for Sim3 {
+    fn default() -> Self {
+        Sim3::identity()
+    }
 }
 
 impl Sim3 {
     /// The identity.
-    pub const IDENTITY: Sim3 = Sim3 {
-        scale: 1.0,
-        rotation: linalg::IDENTITY,
-        translation: [0.0; 3],
-    };
+    pub fn identity() -> Sim3 {
+        Sim3 {
+            scale: 1.0,
+            rotation: Rotation3::identity(),
+            translation: Vector3::zeros(),
+        }
+    }
 
     /// Applies the transform to a point.
     #[inline]
-    pub fn apply(&self, p: Vec3) -> Vec3 {
-        linalg::add(
-            linalg::scale(linalg::mul_vec(&self.rotation, p), self.scale),
-            self.translation,
-        )
+    pub fn apply(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.rotation * p * self.scale + self.translation
     }
 
     /// The inverse transform.
     pub fn inverse(&self) -> Sim3 {
-        let rt = linalg::transpose(&self.rotation);
+        let rt = self.rotation.inverse();
         let s = 1.0 / self.scale;
         Sim3 {
             scale: s,
             rotation: rt,
-            translation: linalg::scale(linalg::mul_vec(&rt, self.translation), -s),
+            translation: -(rt * self.translation) * s,
         }
     }
 
@@ -48,29 +73,78 @@ impl Sim3 {
     pub fn compose(&self, other: &Sim3) -> Sim3 {
         Sim3 {
             scale: self.scale * other.scale,
-            rotation: linalg::mul(&self.rotation, &other.rotation),
-            translation: self.apply(other.translation),
+            rotation: self.rotation * other.rotation,
+            translation: self.apply(&other.translation),
         }
     }
 
-    /// Rotation angle in degrees.
+    /// Rotation angle in degrees (see [`rotation_angle`]).
     pub fn rotation_angle_deg(&self) -> f64 {
-        linalg::rotation_angle(&self.rotation).to_degrees()
+        rotation_angle(&self.rotation).to_degrees()
     }
 }
 
+impl From<Sim3> for Similarity3<f64> {
+    fn from(s: Sim3) -> Self {
+        Similarity3::from_parts(
+            Translation3::from(s.translation),
+            UnitQuaternion::from_rotation_matrix(&s.rotation),
+            s.scale,
+        )
+    }
+}
+
+impl From<Similarity3<f64>> for Sim3 {
+    fn from(s: Similarity3<f64>) -> Self {
+        Sim3 {
+            scale: s.scaling(),
+            rotation: s.isometry.rotation.to_rotation_matrix(),
+            translation: s.isometry.translation.vector,
+        }
+    }
+}
+
+/// Rotation angle of a rotation in radians, accurate for tiny and for near-180-degree
+/// angles: `atan2(|axis|, (trace - 1) / 2)` with `axis = vee(R - R^T) / 2`.
+///
+/// nalgebra's [`Rotation3::angle`] uses `acos((trace - 1) / 2)`, which returns 0 for
+/// angles below about 1e-8 rad (1e-6 degrees): the drift metric `e_r` needs the atan2 form.
+pub fn rotation_angle(r: &Rotation3<f64>) -> f64 {
+    let m = r.matrix();
+    let axis = Vector3::new(
+        m[(2, 1)] - m[(1, 2)],
+        m[(0, 2)] - m[(2, 0)],
+        m[(1, 0)] - m[(0, 1)],
+    ) * 0.5;
+    let cos = (m.trace() - 1.0) * 0.5;
+    axis.norm().atan2(cos)
+}
+
 /// Why an alignment could not be computed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
 pub enum AlignFailure {
     /// Fewer than three correspondences.
+    #[error("{0} correspondence(s), at least 3 are needed")]
     TooFew(usize),
     /// The estimated (or ground-truth) points are (nearly) collinear or identical, so the
     /// rotation about their line is not determined.
+    #[error("the points are collinear or identical, the alignment is not determined")]
     Degenerate,
+    /// The two point lists have different lengths: they do not correspond.
+    #[error("{est} estimated points but {gt} ground-truth points")]
+    LengthMismatch {
+        /// Number of estimated points.
+        est: usize,
+        /// Number of ground-truth points.
+        gt: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("a point has a NaN or infinite coordinate")]
+    NonFinite,
 }
 
 /// The result of [`align_sim3`]: the transform and the RMSE of the aligned points.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Alignment {
     /// `gt_from_est`.
     pub transform: Sim3,
@@ -81,77 +155,91 @@ pub struct Alignment {
 /// Relative size below which the second principal extent of a point set counts as zero.
 const DEGENERATE_RATIO: f64 = 1e-10;
 
+/// Whether the scatter matrix of a point set spans at least a plane: its second largest
+/// eigenvalue is not negligible against the largest.
+fn spans_a_plane(scatter: Matrix3<f64>) -> bool {
+    let mut ev: Vec<f64> = SymmetricEigen::new(scatter)
+        .eigenvalues
+        .iter()
+        .copied()
+        .collect();
+    ev.sort_by(|a, b| b.total_cmp(a));
+    ev[0].is_finite() && ev[0] > 0.0 && ev[1] > DEGENERATE_RATIO * ev[0]
+}
+
 /// Least-squares Sim(3) with `gt ~ s R est + t` (Umeyama): SVD of the centred
 /// cross-covariance with the reflection fix, and the scale
 /// `s = sum <R e_i, g_i> / sum |e_i|^2` over centred points.
-pub fn align_sim3(est: &[Vec3], gt: &[Vec3]) -> Result<Alignment, AlignFailure> {
-    let n = est.len().min(gt.len());
+///
+/// Refuses lists of different lengths, fewer than three points, non-finite coordinates,
+/// and point sets (either one) that do not span a plane.
+pub fn align_sim3(est: &[Vector3<f64>], gt: &[Vector3<f64>]) -> Result<Alignment, AlignFailure> {
+    if est.len() != gt.len() {
+        return Err(AlignFailure::LengthMismatch {
+            est: est.len(),
+            gt: gt.len(),
+        });
+    }
+    let n = est.len();
     if n < 3 {
         return Err(AlignFailure::TooFew(n));
     }
-    let inv_n = 1.0 / n as f64;
-    let mut me = [0.0; 3];
-    let mut mg = [0.0; 3];
-    for (e, g) in est.iter().zip(gt) {
-        me = linalg::add(me, *e);
-        mg = linalg::add(mg, *g);
+    if !est
+        .iter()
+        .chain(gt)
+        .all(|p| p.iter().all(|v| v.is_finite()))
+    {
+        return Err(AlignFailure::NonFinite);
     }
-    me = linalg::scale(me, inv_n);
-    mg = linalg::scale(mg, inv_n);
-    let mut h = [[0.0; 3]; 3];
-    let mut ce = [[0.0; 3]; 3];
-    let mut cg = [[0.0; 3]; 3];
+    let inv_n = 1.0 / n as f64;
+    let me: Vector3<f64> = est.iter().sum::<Vector3<f64>>() * inv_n;
+    let mg: Vector3<f64> = gt.iter().sum::<Vector3<f64>>() * inv_n;
+    let mut h = Matrix3::zeros();
+    let mut ce = Matrix3::zeros();
+    let mut cg = Matrix3::zeros();
     let mut var_e = 0.0;
     for (e, g) in est.iter().zip(gt) {
-        let de = linalg::sub(*e, me);
-        let dg = linalg::sub(*g, mg);
-        var_e += linalg::dot(de, de);
-        for i in 0..3 {
-            for j in 0..3 {
-                h[i][j] += dg[i] * de[j];
-                ce[i][j] += de[i] * de[j];
-                cg[i][j] += dg[i] * dg[j];
-            }
-        }
+        let de = e - me;
+        let dg = g - mg;
+        var_e += de.norm_squared();
+        h += dg * de.transpose();
+        ce += de * de.transpose();
+        cg += dg * dg.transpose();
     }
     // Degeneracy: the scatter of either point set must span at least a plane.
-    for c in [&ce, &cg] {
-        let (_, s, _) = linalg::svd3(c);
-        if s[0].is_nan() || s[0] <= 0.0 || s[1] <= DEGENERATE_RATIO * s[0] {
-            return Err(AlignFailure::Degenerate);
-        }
+    if !(h.iter().all(|v| v.is_finite()) && spans_a_plane(ce) && spans_a_plane(cg)) {
+        return Err(AlignFailure::Degenerate);
     }
-    let (u, _s, v) = linalg::svd3(&h);
-    let d = linalg::det(&u) * linalg::det(&v);
-    let fix = if d < 0.0 { -1.0 } else { 1.0 };
-    // R = U diag(1, 1, fix) V^T
-    let mut r = [[0.0; 3]; 3];
-    for (i, row) in r.iter_mut().enumerate() {
-        for (j, x) in row.iter_mut().enumerate() {
-            *x = u[i][0] * v[j][0] + u[i][1] * v[j][1] + fix * u[i][2] * v[j][2];
-        }
+    let svd = h.svd_unordered(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Err(AlignFailure::Degenerate);
+    };
+    // R = U diag(1, 1, d) V^T, d = sign(det U det V) on the smallest singular value.
+    let mut d = Matrix3::identity();
+    if u.determinant() * v_t.determinant() < 0.0 {
+        let smallest = svd.singular_values.imin();
+        d[(smallest, smallest)] = -1.0;
     }
-    let mut num = 0.0;
-    for (e, g) in est.iter().zip(gt) {
-        let de = linalg::sub(*e, me);
-        let dg = linalg::sub(*g, mg);
-        num += linalg::dot(linalg::mul_vec(&r, de), dg);
-    }
+    let r = Rotation3::from_matrix_unchecked(u * d * v_t);
+    let num: f64 = est
+        .iter()
+        .zip(gt)
+        .map(|(e, g)| (r * (e - me)).dot(&(g - mg)))
+        .sum();
     let s = num / var_e;
     if !(s.is_finite() && s > 0.0) {
         return Err(AlignFailure::Degenerate);
     }
-    let t = linalg::sub(mg, linalg::scale(linalg::mul_vec(&r, me), s));
     let transform = Sim3 {
         scale: s,
         rotation: r,
-        translation: t,
+        translation: mg - r * me * s,
     };
-    let mut sq = 0.0;
-    for (e, g) in est.iter().zip(gt) {
-        let d = linalg::sub(transform.apply(*e), *g);
-        sq += linalg::dot(d, d);
-    }
+    let sq: f64 = est
+        .iter()
+        .zip(gt)
+        .map(|(e, g)| (transform.apply(e) - g).norm_squared())
+        .sum();
     Ok(Alignment {
         transform,
         rmse: (sq * inv_n).sqrt(),

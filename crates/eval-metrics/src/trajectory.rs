@@ -1,19 +1,25 @@
 //! Trajectory text formats: TUM (`t x y z qx qy qz qw`), KITTI (12 numbers a line plus a
 //! times file) and EuRoC csv, and the benchmark's `groundtruthSync.txt`.
 
-use crate::linalg::{self, Vec3};
+use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
 use crate::EvalError;
 
 /// One camera pose: time, position and orientation of the camera in the world
 /// (camera-to-world, `world_from_camera`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+///
+/// The orientation is kept as read: the evaluation uses positions only, and a file's
+/// quaternion need not be of unit norm. [`Pose::world_from_camera`] gives the rigid
+/// transform.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Pose {
     /// Timestamp in seconds.
     pub t: f64,
     /// Camera centre in world coordinates.
-    pub position: Vec3,
-    /// Orientation as a unit quaternion `(qx, qy, qz, qw)`.
-    pub orientation: [f64; 4],
+    pub position: Vector3<f64>,
+    /// Orientation quaternion as read (TUM order `qx qy qz qw`, see [`Quaternion::coords`]).
+    pub orientation: Quaternion<f64>,
 }
 
 impl Pose {
@@ -21,19 +27,42 @@ impl Pose {
     pub fn is_finite(&self) -> bool {
         self.t.is_finite()
             && self.position.iter().all(|v| v.is_finite())
-            && self.orientation.iter().all(|v| v.is_finite())
+            && self.orientation.coords.iter().all(|v| v.is_finite())
+    }
+
+    /// The camera-to-world rigid transform (the orientation normalised), or `None` when the
+    /// pose is not finite or its quaternion has (nearly) zero norm.
+    ///
+    /// ```
+    /// use eval_metrics::parse_tum;
+    /// use nalgebra::Point3;
+    ///
+    /// // a camera at (1, 2, 3) turned by 90 degrees about z
+    /// let t = parse_tum("0 1 2 3 0 0 0.7071067811865476 0.7071067811865476\n")?;
+    /// let world_from_camera = t.poses[0].world_from_camera().unwrap();
+    /// let p = world_from_camera * Point3::new(1.0, 0.0, 0.0);
+    /// assert!((p - Point3::new(1.0, 3.0, 3.0)).norm() < 1e-12);
+    /// # Ok::<(), eval_metrics::EvalError>(())
+    /// ```
+    pub fn world_from_camera(&self) -> Option<Isometry3<f64>> {
+        if !self.is_finite() {
+            return None;
+        }
+        let q = UnitQuaternion::try_new(self.orientation, 1e-12)?;
+        Some(Isometry3::from_parts(Translation3::from(self.position), q))
     }
 }
 
 /// A sequence of poses in file order.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Trajectory {
     /// The poses, in the order of the file.
     pub poses: Vec<Pose>,
 }
 
 /// Supported trajectory file formats.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum TrajectoryFormat {
     /// `t x y z qx qy qz qw` per line (spaces or commas), `#` comments.
     Tum,
@@ -151,8 +180,8 @@ pub fn parse_tum(text: &str) -> Result<Trajectory, EvalError> {
         check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
             t: v[0],
-            position: [v[1], v[2], v[3]],
-            orientation: [v[4], v[5], v[6], v[7]],
+            position: Vector3::new(v[1], v[2], v[3]),
+            orientation: Quaternion::new(v[7], v[4], v[5], v[6]),
         });
     }
     Ok(Trajectory { poses })
@@ -174,10 +203,8 @@ pub fn parse_kitti(poses_text: &str, times_text: &str) -> Result<Trajectory, Eva
             "12 numbers `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz`",
             false,
         )?;
-        let r = [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]];
-        let det = r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
-            - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]);
+        let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
+        let det = r.determinant();
         if det.is_finite() && det.abs() < 1e-6 {
             return Err(EvalError::NotARotation {
                 line: no,
@@ -185,14 +212,20 @@ pub fn parse_kitti(poses_text: &str, times_text: &str) -> Result<Trajectory, Eva
                 found: excerpt(line),
             });
         }
-        let orientation = if r.iter().flatten().all(|x| x.is_finite()) {
-            linalg::matrix_to_quat(&r)
+        let orientation = if r.iter().all(|x| x.is_finite()) {
+            // the quaternion of the matrix as written, with qw >= 0
+            let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+            if q.w < 0.0 {
+                -q.into_inner()
+            } else {
+                q.into_inner()
+            }
         } else {
-            [f64::NAN; 4]
+            Quaternion::new(f64::NAN, f64::NAN, f64::NAN, f64::NAN)
         };
         poses.push(Pose {
             t: 0.0,
-            position: [v[3], v[7], v[11]],
+            position: Vector3::new(v[3], v[7], v[11]),
             orientation,
         });
     }
@@ -222,8 +255,8 @@ pub fn parse_euroc(text: &str) -> Result<Trajectory, EvalError> {
         check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
             t: v[0] * 1e-9,
-            position: [v[1], v[2], v[3]],
-            orientation: [v[5], v[6], v[7], v[4]],
+            position: Vector3::new(v[1], v[2], v[3]),
+            orientation: Quaternion::new(v[4], v[5], v[6], v[7]),
         });
     }
     Ok(Trajectory { poses })
@@ -254,10 +287,10 @@ pub fn detect_format(text: &str) -> TrajectoryFormat {
 
 /// The benchmark's loop-closure ground truth (`groundtruthSync.txt`): one row per frame,
 /// `NaN` positions outside the start and end segments.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct GroundTruth {
     times: Vec<f64>,
-    positions: Vec<Vec3>,
+    positions: Vec<Vector3<f64>>,
 }
 
 impl GroundTruth {
@@ -288,7 +321,7 @@ impl GroundTruth {
             }
             prev = Some((no, t));
             times.push(t);
-            positions.push([v[1], v[2], v[3]]);
+            positions.push(Vector3::new(v[1], v[2], v[3]));
         }
         if times.is_empty() {
             return Err(EvalError::EmptyGroundTruth);
@@ -298,9 +331,18 @@ impl GroundTruth {
 
     /// Builds a ground truth from times and positions (NaN positions allowed; times must
     /// strictly increase).
-    pub fn from_rows(times: Vec<f64>, positions: Vec<Vec3>) -> Result<GroundTruth, EvalError> {
-        if times.is_empty() || times.len() != positions.len() {
+    pub fn from_rows(
+        times: Vec<f64>,
+        positions: Vec<Vector3<f64>>,
+    ) -> Result<GroundTruth, EvalError> {
+        if times.is_empty() {
             return Err(EvalError::EmptyGroundTruth);
+        }
+        if times.len() != positions.len() {
+            return Err(EvalError::RowCount {
+                times: times.len(),
+                positions: positions.len(),
+            });
         }
         for i in 1..times.len() {
             if times[i].is_nan() || times[i] <= times[i - 1] {
@@ -320,7 +362,7 @@ impl GroundTruth {
     }
 
     /// Row positions (NaN outside the segments).
-    pub fn positions(&self) -> &[Vec3] {
+    pub fn positions(&self) -> &[Vector3<f64>] {
         &self.positions
     }
 

@@ -1,6 +1,6 @@
 //! The drift metrics on synthetic runs with known drift.
 use crate::common::{gt_of, path, rel, run};
-use eval_metrics::linalg::axis_angle;
+use eval_metrics::nalgebra::{Rotation3, Unit, Vector3};
 use eval_metrics::{evaluate, FailReason, Segment, Sim3, Trajectory};
 use proptest::prelude::*;
 use synthetic::trajectory::{Drift, EstimateConfig};
@@ -119,7 +119,7 @@ fn drift_transform_matches_the_definition() {
         .positions
         .iter()
         .map(|q| {
-            let (a, b) = (s.apply(*q), en.apply(*q));
+            let (a, b) = (s.apply(q), en.apply(q));
             (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
         })
         .sum();
@@ -144,10 +144,11 @@ proptest! {
         let drift = Drift { scale_walk: 0.002, rotation_walk_deg: 0.05, position_noise: 0.01, ..Drift::default() };
         let est = run(&p, &jump_cfg(drift), seed);
         let a = evaluate(&est, &gt);
-        let sim = Sim3 { scale, rotation: axis_angle(axis, angle), translation: t };
+        let rotation = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::from(axis)), angle);
+        let sim = Sim3 { scale, rotation, translation: Vector3::from(t) };
         let mut moved = est.clone();
         for q in moved.poses.iter_mut() {
-            q.position = sim.apply(q.position);
+            q.position = sim.apply(&q.position);
         }
         let b = evaluate(&moved, &gt);
         prop_assert!(a.is_ok() && b.is_ok());
@@ -207,7 +208,7 @@ fn failures_are_results_with_reasons() {
     // a start segment whose estimated poses are collinear
     let mut est = run(&p, &EstimateConfig::default(), 8);
     for (i, q) in est.poses.iter_mut().take(p.segment_frames).enumerate() {
-        q.position = [i as f64, 0.0, 0.0];
+        q.position = Vector3::new(i as f64, 0.0, 0.0);
     }
     assert_eq!(
         evaluate(&est, &gt).failure,

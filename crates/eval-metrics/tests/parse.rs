@@ -2,14 +2,15 @@
 use eval_metrics::{
     detect_format, parse_euroc, parse_kitti, parse_tum, EvalError, GroundTruth, TrajectoryFormat,
 };
+use nalgebra::{Point3, Quaternion, Vector3};
 
 #[test]
 fn tum_with_comments_blank_lines_and_commas() {
     let t = parse_tum("# timestamp x y z qx qy qz qw\n\n1.0 1 2 3 0 0 0 1\n2.0,4,5,6,0,0,0,1\n")
         .unwrap();
     assert_eq!(t.poses.len(), 2);
-    assert_eq!(t.poses[1].position, [4.0, 5.0, 6.0]);
-    assert_eq!(t.poses[0].orientation, [0.0, 0.0, 0.0, 1.0]);
+    assert_eq!(t.poses[1].position, Vector3::new(4.0, 5.0, 6.0));
+    assert_eq!(t.poses[0].orientation, Quaternion::new(1.0, 0.0, 0.0, 0.0));
     // NaN parses: the evaluation turns it into a failed run
     assert!(parse_tum("1 nan 0 0 0 0 0 1\n").unwrap().poses[0].position[0].is_nan());
 }
@@ -54,12 +55,17 @@ fn kitti_and_euroc_read_the_same_trajectory_as_tum() {
         for (a, b) in tum.poses.iter().zip(&other.poses) {
             assert!((a.t - b.t).abs() < 1e-9);
             assert_eq!(a.position, b.position);
-            for k in 0..4 {
-                assert!(
-                    (a.orientation[k] - b.orientation[k]).abs() < 1e-12,
-                    "{a:?} {b:?}"
-                );
-            }
+            assert!(
+                (a.orientation.coords - b.orientation.coords).amax() < 1e-12,
+                "{a:?} {b:?}"
+            );
+            // the same rigid transform: the camera's x axis in the world
+            let x = Point3::new(1.0, 0.0, 0.0);
+            let (wa, wb) = (
+                a.world_from_camera().unwrap(),
+                b.world_from_camera().unwrap(),
+            );
+            assert!((wa * x - wb * x).amax() < 1e-12);
         }
     }
     let e = parse_kitti("0 -1 0 1 1 0 0 2 0 0 1 3\n", "1\n2\n").unwrap_err();
@@ -108,7 +114,7 @@ fn byte_order_mark_crlf_double_blanks_and_decimal_commas() {
     let t = parse_tum("\u{feff}# t x y z qx qy qz qw\r\n191.7 -6.0e-06  4.0e-07 0 0 0 0 1\r\n")
         .unwrap();
     assert_eq!(t.poses.len(), 1);
-    assert_eq!(t.poses[0].position, [-6.0e-06, 4.0e-07, 0.0]);
+    assert_eq!(t.poses[0].position, Vector3::new(-6.0e-06, 4.0e-07, 0.0));
     let gt = GroundTruth::parse("\u{feff}0 0 0 0 0 0 0 1\r\n1 1 0 0 0 0 0 1\r\n").unwrap();
     assert_eq!(gt.len(), 2);
     assert_eq!(
@@ -138,4 +144,24 @@ fn zero_quaternions_and_singular_rotations_are_refused_with_the_line() {
     assert!(parse_tum("1 0 0 0 nan nan nan nan\n").is_ok());
     // a non-unit quaternion is a rotation too
     assert!(parse_tum("1 0 0 0 0 0 0 2\n").is_ok());
+}
+
+/// The camera-to-world transform of a TUM pose: position and normalised quaternion; none
+/// for a zero quaternion (which the parsers refuse, but a `Pose` can hold).
+#[test]
+fn world_from_camera_is_the_pose_as_an_isometry() {
+    let t = parse_tum("1 1 2 3 0 0 0 2\n").unwrap();
+    let iso = t.poses[0].world_from_camera().unwrap();
+    assert_eq!(iso.translation.vector, Vector3::new(1.0, 2.0, 3.0));
+    assert!(iso.rotation.angle() < 1e-15);
+    let zero = eval_metrics::Pose {
+        t: 2.0,
+        position: Vector3::new(1.0, 2.0, 3.0),
+        orientation: Quaternion::new(0.0, 0.0, 0.0, 0.0),
+    };
+    assert!(zero.world_from_camera().is_none());
+    assert!(zero.is_finite());
+    let json = serde_json::to_string(&t.poses[0]).unwrap();
+    let back: eval_metrics::Pose = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, t.poses[0]);
 }

@@ -92,6 +92,16 @@ pub enum PhotometricError {
     /// Calibration data that cannot determine the result.
     #[error("{0}")]
     Calibration(String),
+    /// A calibration option outside the values it can take.
+    #[error("calibration option `{name}` = {value}: expected {expected}")]
+    InvalidOption {
+        /// The option (the field of the options, the key of a config file).
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// What it can be.
+        expected: &'static str,
+    },
     /// An error of the camera model (rectification).
     #[error(transparent)]
     Camera(#[from] camera_model::CameraError),

@@ -8,6 +8,7 @@
 //! (-0.5, 0.5), corner 1 at (0.5, 0.5).
 
 use camera_model::{Image, Intrinsics};
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, Vector3};
 
 use crate::PlanePose;
 
@@ -17,7 +18,7 @@ use crate::PlanePose;
 pub const ARUCO_WORDS: [u8; 4] = [0b10000, 0b10111, 0b01001, 0b01110];
 
 /// A detected marker.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MarkerDetection {
     /// Its id (0..1024).
     pub id: u16,
@@ -64,33 +65,38 @@ fn sample(img: &Image<u8>, x: f64, y: f64) -> f64 {
     top + fy * (bot - top)
 }
 
-/// Homography (row-major 3x3) mapping `src[i]` to `dst[i]` for four correspondences.
+/// Homography (row-major 3x3, `h22 = 1`) mapping `src[i]` to `dst[i]` for four
+/// correspondences: the 8x8 linear system of the direct linear transform, solved by LU with
+/// partial pivoting. `None` when three of the points are collinear (the system is singular).
 pub fn homography(src: &[[f64; 2]; 4], dst: &[[f64; 2]; 4]) -> Option<[[f64; 3]; 3]> {
-    // 8x8 linear system with h22 = 1
-    let mut a = [[0.0f64; 9]; 8];
+    let mut a = SMatrix::<f64, 8, 8>::zeros();
+    let mut b = SVector::<f64, 8>::zeros();
     for i in 0..4 {
         let ([x, y], [u, v]) = (src[i], dst[i]);
-        a[2 * i] = [x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, u];
-        a[2 * i + 1] = [0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, v];
+        a.set_row(
+            2 * i,
+            &SMatrix::<f64, 1, 8>::from_row_slice(&[x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y]),
+        );
+        a.set_row(
+            2 * i + 1,
+            &SMatrix::<f64, 1, 8>::from_row_slice(&[0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y]),
+        );
+        b[2 * i] = u;
+        b[2 * i + 1] = v;
     }
-    for c in 0..8 {
-        let p = (c..8).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-12 {
-            return None;
-        }
-        a.swap(c, p);
-        for r in 0..8 {
-            if r != c {
-                let f = a[r][c] / a[c][c];
-                let pivot = a[c];
-                for (x, p) in a[r][c..].iter_mut().zip(&pivot[c..]) {
-                    *x -= f * p;
-                }
-            }
-        }
+    let lu = a.lu();
+    // relative pivot threshold: a (nearly) singular system has no unique homography
+    let u = lu.u();
+    let scale = a.amax().max(1e-300);
+    if (0..8).any(|k| u[(k, k)].abs() < 1e-12 * scale) {
+        return None;
     }
-    let h: Vec<f64> = (0..8).map(|i| a[i][8] / a[i][i]).collect();
-    Some([[h[0], h[1], h[2]], [h[3], h[4], h[5]], [h[6], h[7], 1.0]])
+    let h = lu.solve(&b)?;
+    h.iter().all(|v| v.is_finite()).then_some([
+        [h[0], h[1], h[2]],
+        [h[3], h[4], h[5]],
+        [h[6], h[7], 1.0],
+    ])
 }
 
 #[inline]
@@ -451,157 +457,66 @@ pub fn detect_markers(img: &Image<u8>) -> Vec<MarkerDetection> {
     out
 }
 
-fn rodrigues(w: [f64; 3]) -> [[f64; 3]; 3] {
-    let th = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-    if th < 1e-15 {
-        return [[1.0, -w[2], w[1]], [w[2], 1.0, -w[0]], [-w[1], w[0], 1.0]];
-    }
-    let k = [w[0] / th, w[1] / th, w[2] / th];
-    let (s, c) = th.sin_cos();
-    let t = 1.0 - c;
-    [
-        [
-            t * k[0] * k[0] + c,
-            t * k[0] * k[1] - s * k[2],
-            t * k[0] * k[2] + s * k[1],
-        ],
-        [
-            t * k[0] * k[1] + s * k[2],
-            t * k[1] * k[1] + c,
-            t * k[1] * k[2] - s * k[0],
-        ],
-        [
-            t * k[0] * k[2] - s * k[1],
-            t * k[1] * k[2] + s * k[0],
-            t * k[2] * k[2] + c,
-        ],
-    ]
-}
-
-fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = (0..3).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    r
-}
-
 /// The plane points of the marker's corners (corner 0 at (-0.5, 0.5), clockwise).
 pub const MARKER_CORNERS: [[f64; 2]; 4] = [[-0.5, 0.5], [0.5, 0.5], [0.5, -0.5], [-0.5, -0.5]];
 
 /// `camera_from_plane` of a marker seen by the pinhole `k`: homography decomposition, then
-/// Gauss-Newton on the reprojection error of the four corners.
+/// Gauss-Newton on the reprojection error of the four corners (analytic Jacobian, rotation
+/// updated on the left by the exponential map, normal equations solved by Cholesky).
 pub fn marker_pose(k: &Intrinsics, corners: &[[f64; 2]; 4]) -> Option<PlanePose> {
     let n = corners.map(|p| k.pixel_to_normalized(p));
-    let h = homography(&MARKER_CORNERS, &n)?;
-    let col = |j: usize| [h[0][j], h[1][j], h[2][j]];
-    let (h1, h2, h3) = (col(0), col(1), col(2));
-    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    let mut lam = 2.0 / (norm(h1) + norm(h2));
+    let h = Matrix3::from_row_slice(&homography(&MARKER_CORNERS, &n)?.concat());
+    let (h1, h2, h3) = (h.column(0), h.column(1), h.column(2));
+    let mut lam = 2.0 / (h1.norm() + h2.norm());
     if h3[2] * lam < 0.0 {
         lam = -lam;
     }
-    let r1 = h1.map(|x| x * lam);
-    let r2 = h2.map(|x| x * lam);
-    let t = h3.map(|x| x * lam);
-    // orthonormalise [r1 r2 r1xr2] (Gram-Schmidt, symmetric in r1 and r2)
-    let n1 = norm(r1);
-    let a = r1.map(|x| x / n1);
-    let d = a[0] * r2[0] + a[1] * r2[1] + a[2] * r2[2];
-    let b0 = [r2[0] - d * a[0], r2[1] - d * a[1], r2[2] - d * a[2]];
-    let nb = norm(b0);
-    let b = b0.map(|x| x / nb);
-    let c = [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ];
-    let mut r = [[a[0], b[0], c[0]], [a[1], b[1], c[1]], [a[2], b[2], c[2]]];
-    let mut t = t;
-    // Gauss-Newton over (rotation increment, translation) with numeric derivatives
-    let residual = |r: &[[f64; 3]; 3], t: &[f64; 3]| -> [f64; 8] {
-        let mut e = [0.0; 8];
-        for i in 0..4 {
-            let [x, y] = MARKER_CORNERS[i];
-            let pc = [
-                r[0][0] * x + r[0][1] * y + t[0],
-                r[1][0] * x + r[1][1] * y + t[1],
-                r[2][0] * x + r[2][1] * y + t[2],
-            ];
-            e[2 * i] = pc[0] / pc[2] - n[i][0];
-            e[2 * i + 1] = pc[1] / pc[2] - n[i][1];
-        }
-        e
-    };
+    // orthonormalise [r1 r2 r1xr2] (Gram-Schmidt)
+    let a = (h1 * lam).normalize();
+    let r2 = h2 * lam;
+    let b = (r2 - a * a.dot(&r2)).normalize();
+    let c = a.cross(&b);
+    let mut r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[a, b, c]));
+    let mut t: Vector3<f64> = h3 * lam;
+    let plane: [Vector3<f64>; 4] = MARKER_CORNERS.map(|[x, y]| Vector3::new(x, y, 0.0));
     for _ in 0..10 {
-        let e0 = residual(&r, &t);
-        let mut jac = [[0.0f64; 6]; 8];
-        let eps = 1e-7;
-        for p in 0..6 {
-            let (rr, tt) = if p < 3 {
-                let mut w = [0.0; 3];
-                w[p] = eps;
-                (mat_mul(&rodrigues(w), &r), t)
-            } else {
-                let mut tt = t;
-                tt[p - 3] += eps;
-                (r, tt)
-            };
-            let e1 = residual(&rr, &tt);
-            for i in 0..8 {
-                jac[i][p] = (e1[i] - e0[i]) / eps;
-            }
+        // residuals and Jacobian with respect to (w, dt): R <- exp(w) R, t <- t + dt
+        let mut e = SVector::<f64, 8>::zeros();
+        let mut jac = SMatrix::<f64, 8, 6>::zeros();
+        for i in 0..4 {
+            let rx = r * plane[i];
+            let pc = rx + t;
+            let iz = 1.0 / pc[2];
+            e[2 * i] = pc[0] * iz - n[i][0];
+            e[2 * i + 1] = pc[1] * iz - n[i][1];
+            // d projection / d pc
+            let dproj =
+                SMatrix::<f64, 2, 3>::new(iz, 0.0, -pc[0] * iz * iz, 0.0, iz, -pc[1] * iz * iz);
+            // d pc / d w = -[R X]x, d pc / d t = I
+            let jw = dproj * (-rx.cross_matrix());
+            jac.fixed_view_mut::<2, 3>(2 * i, 0).copy_from(&jw);
+            jac.fixed_view_mut::<2, 3>(2 * i, 3).copy_from(&dproj);
         }
-        // normal equations
-        let mut a = [[0.0f64; 6]; 6];
-        let mut g = [0.0f64; 6];
-        for i in 0..8 {
-            for p in 0..6 {
-                g[p] -= jac[i][p] * e0[i];
-                for q2 in 0..6 {
-                    a[p][q2] += jac[i][p] * jac[i][q2];
-                }
-            }
-        }
-        let dx = solve6(a, g)?;
-        r = mat_mul(&rodrigues([dx[0], dx[1], dx[2]]), &r);
-        t = [t[0] + dx[3], t[1] + dx[4], t[2] + dx[5]];
-        if dx.iter().map(|v| v.abs()).fold(0.0, f64::max) < 1e-12 {
+        let dx = (jac.transpose() * jac)
+            .cholesky()?
+            .solve(&(-jac.transpose() * e));
+        r = Rotation3::new(dx.fixed_rows::<3>(0).into_owned()) * r;
+        t += dx.fixed_rows::<3>(3);
+        if dx.amax() < 1e-12 {
             break;
         }
     }
-    (t[2] > 0.0 && t.iter().all(|v| v.is_finite())).then_some(PlanePose { r, t })
-}
-
-fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
-    for c in 0..6 {
-        let p = (c..6).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-300 {
-            return None;
+    let m = r.matrix();
+    (t[2] > 0.0 && t.iter().all(|v| v.is_finite()) && m.iter().all(|v| v.is_finite())).then(|| {
+        PlanePose {
+            r: [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(i, j)])),
+            t: t.into(),
         }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..6 {
-            let f = a[r][c] / a[c][c];
-            let pivot = a[c];
-            for (x, p) in a[r][c..].iter_mut().zip(&pivot[c..]) {
-                *x -= f * p;
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = [0.0; 6];
-    for r in (0..6).rev() {
-        let s: f64 = (r + 1..6).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    Some(x)
+    })
 }
 
 /// What the marker of one frame gave.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum PoseFromMarker {
     /// The plane pose.
     Found(PlanePose),

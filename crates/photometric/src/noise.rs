@@ -9,7 +9,7 @@ const LEVELS: usize = 256;
 /// The grey-level noise of one observation as a function of its expected grey value `p`:
 /// variance `(read + shot U(p)) / U'(p)^2 + adc` (grey levels squared), with `U'` the
 /// slope of the inverse response per grey level.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NoiseModel {
     /// Signal-independent noise before the response (read noise), in U-units squared.
     pub read: f64,

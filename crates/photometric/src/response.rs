@@ -12,11 +12,12 @@
 use crate::PhotometricError;
 
 /// The inverse response `U`: grey value to (relative) irradiance times exposure.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct InverseResponse {
     /// `2^k` values, `k` in 8..=16.
     table: Vec<f64>,
     /// The table at the 256 grey values of 8-bit frames (the table itself when `k == 8`).
+    #[serde(skip)]
     u8_table: [f64; 256],
 }
 

@@ -53,16 +53,19 @@ const LEVELS: usize = 256;
 const GAUGE: usize = 128;
 
 /// Options of [`calibrate_response`].
-#[derive(Clone, Debug)]
+///
+/// Deserialised fields that are absent keep their defaults; unknown ones are an error.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ResponseOptions {
     /// Iteration limit.
     pub max_iterations: usize,
     /// Stop when the largest change of `U` (scaled to `U(255) = 255`) between two iterations
     /// is below this many grey levels.
     pub tolerance: f64,
-    /// Strength of the third-difference prior, relative to the strength the exposure steps
-    /// call for (see the module documentation); 0 leaves the data's blind directions to the
-    /// iteration.
+    /// The smallest scale, in grey values, over which the third-difference prior smooths
+    /// `U` (it smooths over more where the exposure steps leave longer ripples undetermined;
+    /// see the module documentation). Smaller values leave more to the data.
     pub smoothness: f64,
     /// Radius (pixels) of the neighbourhood dropped around saturated pixels.
     pub saturation_border: usize,
@@ -86,8 +89,61 @@ impl Default for ResponseOptions {
     }
 }
 
+impl ResponseOptions {
+    /// Refuses options outside the values they can take (a config file or a caller may give
+    /// anything): what [`calibrate_response`] checks before any work.
+    pub fn check(&self) -> Result<(), PhotometricError> {
+        let bad = |name, value: String, expected| {
+            Err(PhotometricError::InvalidOption {
+                name,
+                value,
+                expected,
+            })
+        };
+        if !(1..=MAX_ITERATIONS_LIMIT).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                self.max_iterations.to_string(),
+                "1 to 100000 iterations",
+            );
+        }
+        if !self.tolerance.is_finite() || self.tolerance < 0.0 {
+            return bad(
+                "tolerance",
+                self.tolerance.to_string(),
+                "a finite number of grey levels, 0 or more",
+            );
+        }
+        if !self.smoothness.is_finite() || self.smoothness < 0.0 {
+            return bad(
+                "smoothness",
+                self.smoothness.to_string(),
+                "a finite number of grey values, 0 or more",
+            );
+        }
+        if self.saturation_border > 256 {
+            return bad(
+                "saturation_border",
+                self.saturation_border.to_string(),
+                "0 to 256 pixels",
+            );
+        }
+        if !self.censor_sigmas.is_finite() || self.censor_sigmas <= 0.0 {
+            return bad(
+                "censor_sigmas",
+                self.censor_sigmas.to_string(),
+                "a finite number of standard deviations above 0",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The largest `max_iterations` of the calibration options.
+pub(crate) const MAX_ITERATIONS_LIMIT: usize = 100_000;
+
 /// The result of [`calibrate_response`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct ResponseCalibration {
     /// The inverse response, `U(255) = 255`, strictly increasing.
     pub response: InverseResponse,
@@ -794,7 +850,7 @@ fn extrapolate_with(
             }
         } else {
             let slope = (u[last] - u[first]) / (last - first).max(1) as f64;
-            for (k, o) in out.iter_mut().enumerate().take(LEVELS).skip(last + 1) {
+            for (k, o) in out.iter_mut().enumerate().skip(last + 1) {
                 *o = u[last] + slope.max(1e-9) * (k - last) as f64;
             }
         }
@@ -1287,6 +1343,7 @@ pub fn calibrate_response(
     options: &ResponseOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<ResponseCalibration, PhotometricError> {
+    options.check()?;
     let n = frames.len();
     if n < 2 {
         return Err(PhotometricError::Calibration(format!(

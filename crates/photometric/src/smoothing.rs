@@ -13,7 +13,7 @@
 use crate::PhotometricError;
 
 /// Which smoothing was applied and why.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SmoothingChoice {
     /// Standard deviation of the kernel in pixels (0: no smoothing).
     pub sigma_px: f64,
@@ -340,6 +340,34 @@ pub(crate) fn choose_smoothing(
             for v in var.iter_mut() {
                 *v *= kappa;
             }
+        }
+    }
+    // the smoothing's own error: a local plane misses the curvature of V. Smoothing the
+    // smoothed map again adds about the same bias once more (S(SV) - SV is the bias of S at
+    // V, with the noise already averaged out), and it enters the variance in quadrature
+    // (that difference still carries some noise, measured by the same difference of the odd
+    // and of the even half and taken out; the squared bias is averaged over the kernel)
+    if radius > 0 {
+        let again = |m: &[f64]| local_linear(m, &wt, w, h, radius, false).0;
+        let (so, _) = local_linear(odd, &wt, w, h, radius, false);
+        let (se, _) = local_linear(even, &wt, w, h, radius, false);
+        let (tf, to, te) = (again(&smoothed), again(&so), again(&se));
+        let b2: Vec<f64> = (0..n)
+            .map(|i| {
+                let d = tf[i] - smoothed[i];
+                let e = ((to[i] - so[i]) - (te[i] - se[i])) / 2.0;
+                if d.is_finite() && e.is_finite() {
+                    d * d - e * e
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        // (blur sums over its kernel: (2r+1)^2 per box pass, three passes)
+        let b2 = blur(&b2, w, h, radius);
+        let norm = ((2 * radius + 1) as f64).powi(6);
+        for (v, b) in var.iter_mut().zip(&b2) {
+            *v += (b / norm).max(0.0);
         }
     }
     // fill what the kernel does not reach

@@ -7,7 +7,7 @@ use crate::PhotometricError;
 
 /// A dense vignette map, `max(V) = 1`. Pixels with `V = 0` (for example a black border in the
 /// PNG) are masked: the correction marks them invalid instead of dividing by zero.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Vignette {
     v: Image<f32>,
     masked: usize,

@@ -32,7 +32,7 @@ use crate::{InverseResponse, PhotometricError};
 
 /// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`, the plane being
 /// `z = 0` with the marker the unit square at its origin.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanePose {
     /// Rotation, row-major.
     pub r: [[f64; 3]; 3],
@@ -64,7 +64,10 @@ pub trait PlaneFrames: Sync {
 }
 
 /// Options of [`calibrate_vignette`].
-#[derive(Clone, Debug)]
+///
+/// Deserialised fields that are absent keep their defaults; unknown ones are an error.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct VignetteOptions {
     /// Iteration limit.
     pub max_iterations: usize,
@@ -85,10 +88,6 @@ pub struct VignetteOptions {
     /// Smoothing of the recommended map (standard deviation in pixels); `None` chooses it by
     /// cross-validation.
     pub smoothing_px: Option<f64>,
-    /// The marker and this margin around it (marker widths) are left out: its black and
-    /// white cells are the sharpest edges on the plane, where the smallest misregistration
-    /// makes the largest error. `None` uses the marker too.
-    pub marker_margin: Option<f64>,
 }
 
 impl Default for VignetteOptions {
@@ -102,13 +101,72 @@ impl Default for VignetteOptions {
             min_observations: 8,
             registration_px: 0.25,
             smoothing_px: None,
-            marker_margin: None,
         }
     }
 }
 
+impl VignetteOptions {
+    /// Refuses options outside the values they can take (a config file or a caller may give
+    /// anything): what [`calibrate_vignette`] checks before any work. The plane grid is at
+    /// most 4096 cells a side (the paper's is 1000; the memory grows with its square).
+    pub fn check(&self) -> Result<(), PhotometricError> {
+        let bad = |name, value: String, expected| {
+            Err(PhotometricError::InvalidOption {
+                name,
+                value,
+                expected,
+            })
+        };
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !(1..=crate::response_calib::MAX_ITERATIONS_LIMIT).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                self.max_iterations.to_string(),
+                "1 to 100000 iterations",
+            );
+        }
+        if !non_negative(self.tolerance) {
+            return bad(
+                "tolerance",
+                self.tolerance.to_string(),
+                "a finite relative change, 0 or more",
+            );
+        }
+        if !(8..=4096).contains(&self.grid) {
+            return bad("grid", self.grid.to_string(), "8 to 4096 cells per side");
+        }
+        if !self.extent.is_finite() || self.extent <= 0.0 {
+            return bad(
+                "extent",
+                self.extent.to_string(),
+                "a finite number of marker widths above 0",
+            );
+        }
+        if self.outlier_sigmas.is_nan() || self.outlier_sigmas <= 0.0 {
+            return bad(
+                "outlier_sigmas",
+                self.outlier_sigmas.to_string(),
+                "a number of standard deviations above 0",
+            );
+        }
+        if !non_negative(self.registration_px) {
+            return bad(
+                "registration_px",
+                self.registration_px.to_string(),
+                "a finite number of pixels, 0 or more",
+            );
+        }
+        if let Some(s) = self.smoothing_px {
+            if !non_negative(s) || s > 1000.0 {
+                return bad("smoothing_px", s.to_string(), "0 to 1000 pixels");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The result of [`calibrate_vignette`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct VignetteCalibration {
     /// The map recommended for correction: the raw map smoothed as chosen, `max = 1`, finite
     /// everywhere.
@@ -236,10 +294,10 @@ struct Prepared {
 /// What every pass needs.
 struct Problem<'a> {
     frames: &'a dyn PlaneFrames,
-    /// Grid coordinates of the left-out square around the marker (`lo`, `hi`; empty when
-    /// `lo > hi`).
-    exclude: (f64, f64),
-    rays: Vec<[f32; 3]>,
+    rays: &'a [[f32; 3]],
+    /// The pixels the problem has, as indices into the image (all of them, or a coarse
+    /// sample); `V` is indexed by their position here.
+    sample: Vec<u32>,
     size: ImageSize,
     u: [f64; 256],
     options: &'a VignetteOptions,
@@ -247,15 +305,6 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
-    /// Whether a grid position is in the left-out square around the marker.
-    #[inline]
-    fn excluded(&self, g: [f64; 2]) -> bool {
-        g[0] >= self.exclude.0
-            && g[0] <= self.exclude.1
-            && g[1] >= self.exclude.0
-            && g[1] <= self.exclude.1
-    }
-
     fn prepare(&self, i: usize) -> Result<Option<Prepared>, PhotometricError> {
         let frame = self.frames.frame(i)?;
         check_frame(&frame, self.size)?;
@@ -285,15 +334,6 @@ struct Model {
     c: Vec<f32>,
     noise: NoiseModel,
     reject: bool,
-}
-
-/// The variance of an observation predicted at `pred` (U-units) whose bilinear sample of `C`
-/// has gradient magnitude `grad` per cell: sensor noise plus registration error.
-#[inline]
-fn obs_variance(var_table: &[f64], var_scale: f64, pred: f64, tv: f64, grad: f64, reg: f64) -> f64 {
-    let k = ((pred * var_scale) as usize).min(var_table.len() - 1);
-    let g = tv * grad * reg;
-    var_table[k] + g * g
 }
 
 /// Sums of the V step.
@@ -362,17 +402,42 @@ impl VSums {
     }
 }
 
-/// The variance table of the noise model over the energy (U-units), `VAR_BINS` bins up to
-/// `U(255)`.
-const VAR_BINS: usize = 1024;
+/// Bins of the lookup tables over the energy (U-units) up to `U(255)`.
+const VAR_BINS: usize = 2048;
 
-fn variance_table(u: &[f64; 256], noise: &NoiseModel) -> (Vec<f64>, f64) {
-    let top = u[255].max(1e-9);
-    let scale = (VAR_BINS - 1) as f64 / top;
-    let table = (0..VAR_BINS)
-        .map(|b| noise.energy_variance(u, b as f64 / scale))
-        .collect();
-    (table, scale)
+/// Per energy bin: the noise model's variance of `U(I)`, the grey value, and the inverse
+/// slope of `U` there (residuals in grey values for the noise model's fit).
+struct Tables {
+    var: Vec<f64>,
+    grey: Vec<u8>,
+    inv_slope: Vec<f64>,
+    scale: f64,
+}
+
+impl Tables {
+    fn new(u: &[f64; 256], noise: &NoiseModel) -> Tables {
+        let top = u[255].max(1e-9);
+        let scale = (VAR_BINS - 1) as f64 / top;
+        let mut t = Tables {
+            var: Vec::with_capacity(VAR_BINS),
+            grey: Vec::with_capacity(VAR_BINS),
+            inv_slope: Vec::with_capacity(VAR_BINS),
+            scale,
+        };
+        for b in 0..VAR_BINS {
+            let e = b as f64 / scale;
+            t.var.push(noise.energy_variance(u, e));
+            let k = u.partition_point(|&x| x <= e).clamp(1, 255);
+            t.grey.push(k as u8);
+            t.inv_slope.push(1.0 / (u[k] - u[k - 1]).max(1e-9));
+        }
+        t
+    }
+
+    #[inline]
+    fn bin(&self, e: f64) -> usize {
+        ((e.max(0.0) * self.scale) as usize).min(VAR_BINS - 1)
+    }
 }
 
 /// Parallel jobs of a pass over the frames: consecutive frames share their accumulators.
@@ -409,121 +474,47 @@ fn fold_frame_jobs<T: Send>(
     Ok(())
 }
 
-/// The C step. As the paper (`jacobi = false`): each cell's irradiance is the weighted
-/// average of what the observations splatted onto it say, `c = sum b w tV U(I) / sum b w
-/// (tV)^2` (`b` the bilinear weights): a slightly blurred `C`. With `jacobi`, the same splat
-/// of the residuals corrects the current `C` (`c += sum b w tV r / sum b w (tV)^2`), a Jacobi
-/// step that converges, with the iteration, to the exact bilinear least-squares `C`.
-fn c_step(
+/// One pass over the data with `V` and `C` as they are: the sums of the V step (the exact
+/// per-pixel least squares with `C` fixed) and of the C step (a Jacobi step towards the exact
+/// bilinear least-squares `C` with `V` fixed: the residuals splatted onto the cells, `c +=
+/// sum b w tV r / sum b w (tV)^2`), and the statistics of the residuals.
+fn pass(
     p: &Problem<'_>,
     model: &Model,
-    var: &(Vec<f64>, f64),
-    jacobi: bool,
-) -> Result<Vec<f32>, PhotometricError> {
+    tables: &Tables,
+    want_c: bool,
+) -> Result<(VSums, Vec<f32>), PhotometricError> {
+    let npx = p.sample.len();
     let ncell = cells(p.grid);
-    let reg = p.options.registration_px;
-    let grid = p.grid;
-    let mut num_total = vec![0.0f64; ncell];
-    let mut den_total = vec![0.0f64; ncell];
-    fold_frame_jobs(
-        p.frames.len(),
-        |range| -> Result<(Vec<f32>, Vec<f32>), PhotometricError> {
-            let mut num = vec![0.0f32; ncell];
-            let mut den = vec![0.0f32; ncell];
-            for i in range {
-                let Some(pf) = p.prepare(i)? else {
-                    continue;
-                };
-                let t = pf.frame.exposure_ms;
-                for (px, &k) in pf.frame.image.data().iter().enumerate() {
-                    if k == 255 {
-                        continue;
-                    }
-                    let Some(g) = grid_coords(p.rays[px], &pf.m, grid) else {
-                        continue;
-                    };
-                    let (idx, wt, fx, fy) = taps(g, grid);
-                    let cs = [
-                        model.c[idx[0]] as f64,
-                        model.c[idx[1]] as f64,
-                        model.c[idx[2]] as f64,
-                        model.c[idx[3]] as f64,
-                    ];
-                    let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
-                    let tv = t * model.v[px];
-                    if tv.is_nan() || tv <= 0.0 {
-                        continue;
-                    }
-                    let obs = p.u[k as usize];
-                    let pred = tv * cq;
-                    let gx = (cs[1] - cs[0]) * (1.0 - fy) + (cs[3] - cs[2]) * fy;
-                    let gy = (cs[2] - cs[0]) * (1.0 - fx) + (cs[3] - cs[1]) * fx;
-                    let grad = (gx * gx + gy * gy).sqrt() / pf.cells_per_px.max(1e-9);
-                    let vr = obs_variance(&var.0, var.1, pred.max(0.0), tv, grad, reg);
-                    if model.reject && (obs - pred).powi(2) > p.options.outlier_sigmas.powi(2) * vr
-                    {
-                        continue;
-                    }
-                    let target = if jacobi { obs - pred } else { obs };
-                    let (a, b) = (tv * target / vr, tv * tv / vr);
-                    for j in 0..4 {
-                        num[idx[j]] += (wt[j] * a) as f32;
-                        den[idx[j]] += (wt[j] * b) as f32;
-                    }
-                }
-            }
-            Ok((num, den))
-        },
-        |(num, den)| {
-            for (t, v) in num_total.iter_mut().zip(&num) {
-                *t += *v as f64;
-            }
-            for (t, v) in den_total.iter_mut().zip(&den) {
-                *t += *v as f64;
-            }
-        },
-    )?;
-    let mut c = model.c.clone();
-    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
-        if *de > 0.0 {
-            let base = if jacobi { *cj as f64 } else { 0.0 };
-            *cj = (base + nu / de).max(0.0) as f32;
-        }
-    }
-    Ok(c)
-}
-
-/// The V step: `V(x) = sum w tC U(I) / sum w (tC)^2` per pixel with `C` fixed, and the
-/// statistics of the residuals.
-fn v_step(
-    p: &Problem<'_>,
-    model: &Model,
-    var: &(Vec<f64>, f64),
-) -> Result<VSums, PhotometricError> {
-    let npx = p.rays.len();
-    let reg = p.options.registration_px;
+    let reg2 = p.options.registration_px * p.options.registration_px;
+    let out2 = p.options.outlier_sigmas * p.options.outlier_sigmas;
     let u = &p.u;
+    let cells_needed = if want_c { ncell } else { 0 };
     let mut total = VSums::new(npx);
+    let mut num_total = vec![0.0f64; cells_needed];
+    let mut den_total = vec![0.0f64; cells_needed];
     fold_frame_jobs(
         p.frames.len(),
-        |range| -> Result<VSums, PhotometricError> {
+        |range| -> Result<(VSums, Vec<f32>, Vec<f32>), PhotometricError> {
             let mut acc = VSums::new(npx);
+            let mut cnum = vec![0.0f32; cells_needed];
+            let mut cden = vec![0.0f32; cells_needed];
             for i in range {
                 let Some(pf) = p.prepare(i)? else {
                     continue;
                 };
                 let t = pf.frame.exposure_ms;
                 let odd = i % 2 == 1;
-                for (px, &k) in pf.frame.image.data().iter().enumerate() {
+                let inv_cpp2 = 1.0 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+                let data = pf.frame.image.data();
+                for (px, &pix) in p.sample.iter().enumerate() {
+                    let k = data[pix as usize];
                     if k == 255 {
                         continue;
                     }
-                    let Some(g) = grid_coords(p.rays[px], &pf.m, p.grid) else {
+                    let Some(g) = grid_coords(p.rays[pix as usize], &pf.m, p.grid) else {
                         continue;
                     };
-                    if p.excluded(g) {
-                        continue;
-                    }
                     let (idx, wt, fx, fy) = taps(g, p.grid);
                     let cs = [
                         model.c[idx[0]] as f64,
@@ -532,23 +523,35 @@ fn v_step(
                         model.c[idx[3]] as f64,
                     ];
                     let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
-                    if cq.is_nan() || cq <= 0.0 {
+                    let vx = model.v[px];
+                    let tv = t * vx;
+                    if tv.is_nan() || tv <= 0.0 || cq.is_nan() || cq < 0.0 {
                         continue;
                     }
                     let tc = t * cq;
                     let obs = u[k as usize];
-                    let vx = model.v[px];
                     let pred = tc * vx;
                     let gx = (cs[1] - cs[0]) * (1.0 - fy) + (cs[3] - cs[2]) * fy;
                     let gy = (cs[2] - cs[0]) * (1.0 - fx) + (cs[3] - cs[1]) * fx;
-                    let grad = (gx * gx + gy * gy).sqrt() / pf.cells_per_px.max(1e-9);
-                    let vr = obs_variance(&var.0, var.1, pred.max(0.0), t * vx, grad, reg);
+                    let bin = tables.bin(pred);
+                    // sensor noise plus the error a misregistration makes where C has edges
+                    let vr = tables.var[bin] + tv * tv * (gx * gx + gy * gy) * inv_cpp2 * reg2;
                     let r = obs - pred;
-                    if model.reject && r * r > p.options.outlier_sigmas.powi(2) * vr {
+                    if model.reject && r * r > out2 * vr {
                         acc.outliers += 1;
                         continue;
                     }
                     let w = 1.0 / vr;
+                    if want_c {
+                        let (a, b) = ((w * tv * r) as f32, (w * tv * tv) as f32);
+                        for j in 0..4 {
+                            cnum[idx[j]] += wt[j] as f32 * a;
+                            cden[idx[j]] += wt[j] as f32 * b;
+                        }
+                    }
+                    if cq <= 0.0 {
+                        continue;
+                    }
                     acc.num[px] += w * tc * obs;
                     acc.den[px] += w * tc * tc;
                     if odd {
@@ -560,18 +563,30 @@ fn v_step(
                     acc.nobs += 1;
                     acc.pred2 += pred * pred;
                     acc.res2 += r * r;
-                    // residual in grey levels by predicted grey value (for the noise model)
-                    let kp = u.partition_point(|&x| x <= pred).clamp(1, 255);
-                    let slope = (u[kp] - u[kp - 1]).max(1e-9);
-                    acc.rss[kp] += (r / slope).powi(2);
+                    let kp = tables.grey[bin] as usize;
+                    acc.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
                     acc.rcnt[kp] += 1.0;
                 }
             }
-            Ok(acc)
+            Ok((acc, cnum, cden))
         },
-        |part| total.add(&part),
+        |(acc, cnum, cden)| {
+            total.add(&acc);
+            for (t, v) in num_total.iter_mut().zip(&cnum) {
+                *t += *v as f64;
+            }
+            for (t, v) in den_total.iter_mut().zip(&cden) {
+                *t += *v as f64;
+            }
+        },
     )?;
-    Ok(total)
+    let mut c = model.c.clone();
+    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
+        if *de > 0.0 {
+            *cj = (*cj as f64 + nu / de).max(0.0) as f32;
+        }
+    }
+    Ok((total, c))
 }
 
 /// Union-find over pixels and plane cells, on 8x8 pixel blocks and 8x8 cell tiles: the
@@ -626,90 +641,107 @@ fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
     Ok((roots.len(), label))
 }
 
+/// The coarse stage has every `COARSE_STRIDE`-th pixel in each direction and a grid as
+/// much coarser.
+const COARSE_STRIDE: usize = 4;
+
+/// The coarse stage only needs to bring the fine one near its solution.
+const COARSE_TOLERANCE: f64 = 2e-4;
+
 /// Iterations Anderson mixing remembers.
 const ANDERSON_MEMORY: usize = 5;
 
 /// Anderson mixing of the fixed-point iteration on `V` (memory `m`): the next iterate
-/// combines the last ones so that the combined residual is smallest.
+/// combines the last ones so that the combined residual is smallest. Only the last iterate
+/// and residual are kept in full precision; the history is their differences in `f32`
+/// (about 7 significant digits of a step, far below the tolerance), which keeps the memory
+/// at `2 m + 2` vectors of half size.
 struct Anderson {
     m: usize,
-    xs: Vec<Vec<f64>>,
-    fs: Vec<Vec<f64>>,
+    last: Option<(Vec<f64>, Vec<f64>)>,
+    /// Differences of the residuals `f = g(x) - x` of consecutive iterations.
+    df: std::collections::VecDeque<Vec<f32>>,
+    /// Differences of the images `g(x)` (`dx + df`).
+    dg: std::collections::VecDeque<Vec<f32>>,
 }
 
 impl Anderson {
     fn new(m: usize) -> Anderson {
         Anderson {
             m,
-            xs: Vec::new(),
-            fs: Vec::new(),
+            last: None,
+            df: Default::default(),
+            dg: Default::default(),
         }
     }
 
     /// Given the iterate `x` and its image `gx` under the iteration, the next iterate.
     fn step(&mut self, x: &[f64], gx: &[f64]) -> Vec<f64> {
         let f: Vec<f64> = gx.iter().zip(x).map(|(a, b)| a - b).collect();
-        self.xs.push(x.to_vec());
-        self.fs.push(f.clone());
-        if self.xs.len() > self.m + 1 {
-            self.xs.remove(0);
-            self.fs.remove(0);
+        if let Some((lx, lf)) = self.last.take() {
+            if self.df.len() == self.m {
+                self.df.pop_front();
+                self.dg.pop_front();
+            }
+            self.df
+                .push_back(f.iter().zip(&lf).map(|(a, b)| (a - b) as f32).collect());
+            self.dg.push_back(
+                gx.iter()
+                    .zip(&lx)
+                    .zip(&lf)
+                    .map(|((g, x0), f0)| (g - (x0 + f0)) as f32)
+                    .collect(),
+            );
         }
-        let n = self.fs.len();
-        if n < 2 {
-            return gx.to_vec();
+        let k = self.df.len();
+        let mut out = gx.to_vec();
+        self.last = Some((x.to_vec(), f));
+        if k == 0 {
+            return out;
         }
-        // differences of residuals; least squares for the mixing coefficients
-        let k = n - 1;
-        let df: Vec<Vec<f64>> = (0..k)
-            .map(|j| {
-                self.fs[j + 1]
-                    .iter()
-                    .zip(&self.fs[j])
-                    .map(|(a, b)| a - b)
-                    .collect()
-            })
-            .collect();
+        let Some((_, f)) = &self.last else {
+            return out;
+        };
+        // least squares for the mixing coefficients
         let mut ata = nalgebra::DMatrix::<f64>::zeros(k, k);
         let mut atb = nalgebra::DVector::<f64>::zeros(k);
         for a in 0..k {
             for b in a..k {
-                let d: f64 = df[a].iter().zip(&df[b]).map(|(p, q)| p * q).sum();
+                let d: f64 = self.df[a]
+                    .iter()
+                    .zip(&self.df[b])
+                    .map(|(p, q)| *p as f64 * *q as f64)
+                    .sum();
                 ata[(a, b)] = d;
                 ata[(b, a)] = d;
             }
-            atb[a] = df[a].iter().zip(&f).map(|(p, q)| p * q).sum();
+            atb[a] = self.df[a].iter().zip(f).map(|(p, q)| *p as f64 * q).sum();
         }
         let scale = (0..k).map(|a| ata[(a, a)]).fold(0.0, f64::max).max(1e-300);
         for a in 0..k {
             ata[(a, a)] += 1e-10 * scale;
         }
         let Some(gamma) = ata.cholesky().map(|c| c.solve(&atb)) else {
-            self.xs.clear();
-            self.fs.clear();
-            return gx.to_vec();
+            self.reset();
+            return out;
         };
-        // x_next = gx - sum gamma_j (dx_j + df_j), dx_j the differences of the iterates
-        let mut out = gx.to_vec();
-        for j in 0..k {
+        // x_next = gx - sum gamma_j dg_j
+        for (j, dg) in self.dg.iter().enumerate() {
             let gj = gamma[j];
             if gj == 0.0 || !gj.is_finite() {
                 continue;
             }
-            for ((o, (x1, x0)), (f1, f0)) in out
-                .iter_mut()
-                .zip(self.xs[j + 1].iter().zip(&self.xs[j]))
-                .zip(self.fs[j + 1].iter().zip(&self.fs[j]))
-            {
-                *o -= gj * ((x1 - x0) + (f1 - f0));
+            for (o, d) in out.iter_mut().zip(dg) {
+                *o -= gj * *d as f64;
             }
         }
         out
     }
 
     fn reset(&mut self) {
-        self.xs.clear();
-        self.fs.clear();
+        self.last = None;
+        self.df.clear();
+        self.dg.clear();
     }
 }
 
@@ -724,6 +756,7 @@ pub fn calibrate_vignette(
     options: &VignetteOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<VignetteCalibration, PhotometricError> {
+    options.check()?;
     if frames.is_empty() {
         return Err(PhotometricError::Calibration(
             "vignette calibration needs at least one frame with a plane pose".into(),
@@ -745,29 +778,16 @@ pub fn calibrate_vignette(
                 .map_or([f32::NAN; 3], |r| [r[0] as f32, r[1] as f32, r[2] as f32])
         })
         .collect();
-    let g = grid as f64;
-    let exclude = match options.marker_margin {
-        Some(m) => {
-            let half = 0.5 + m.max(0.0);
-            // gx = (x / extent + 0.5) g - 0.5
-            (
-                (-half / options.extent + 0.5) * g - 0.5,
-                (half / options.extent + 0.5) * g - 0.5,
-            )
-        }
-        None => (1.0, 0.0),
-    };
-    let problem = Problem {
+    // observability: one connected part, image corners covered
+    let (parts, labels) = components(&Problem {
         frames,
-        exclude,
-        rays,
+        rays: &rays,
+        sample: Vec::new(),
         size,
         u: *response.values(),
         options,
         grid,
-    };
-    // observability: one connected part, image corners covered
-    let (parts, labels) = components(&problem)?;
+    })?;
     if parts == 0 {
         return Err(PhotometricError::Calibration(
             "no pixel of any frame sees the calibration plane".into(),
@@ -810,38 +830,179 @@ pub fn calibrate_vignette(
         ));
     }
     let u = *response.values();
-    let mut model = Model {
-        v: vec![1.0; npx],
-        c: vec![0.0; cells(grid)],
-        noise: NoiseModel {
-            read: 1.0,
-            shot: 0.1,
-            adc: 1.0,
-        },
-        reject: false,
+    // coarse to fine: the alternation creeps along smooth trades between V and C, which a
+    // problem on every 4th pixel in each direction and a 4x coarser grid resolves at a
+    // sixteenth of the cost; its V starts the full problem
+    let stride = COARSE_STRIDE;
+    let coarse_ok = w >= 16 * stride && h >= 16 * stride && grid >= 64;
+    let mut warm: Option<(Vec<f64>, NoiseModel)> = None;
+    let mut coarse_iterations = 0;
+    if coarse_ok {
+        let (cw, ch) = (w.div_ceil(stride), h.div_ceil(stride));
+        let sample: Vec<u32> = (0..ch)
+            .flat_map(|y| {
+                (0..cw).map(move |x| {
+                    let (px, py) = (
+                        (x * stride + stride / 2).min(w - 1),
+                        (y * stride + stride / 2).min(h - 1),
+                    );
+                    (py * w + px) as u32
+                })
+            })
+            .collect();
+        let coarse = Problem {
+            frames,
+            rays: &rays,
+            sample,
+            size,
+            u,
+            options,
+            grid: grid / stride,
+        };
+        let stage = solve(
+            &coarse,
+            None,
+            COARSE_TOLERANCE,
+            options.max_iterations,
+            &|_, _| {},
+        )?;
+        coarse_iterations = stage.iterations;
+        // V at every pixel from the coarse one (bilinear between the sample points)
+        let cv = &stage.model.v;
+        let full_v: Vec<f64> = (0..npx)
+            .map(|i| {
+                let fx = ((i % w) as f64 - (stride / 2) as f64) / stride as f64;
+                let fy = ((i / w) as f64 - (stride / 2) as f64) / stride as f64;
+                let x0 = (fx.floor().max(0.0) as usize).min(cw - 1);
+                let y0 = (fy.floor().max(0.0) as usize).min(ch - 1);
+                let (x1, y1) = ((x0 + 1).min(cw - 1), (y0 + 1).min(ch - 1));
+                let ax = (fx - x0 as f64).clamp(0.0, 1.0);
+                let ay = (fy - y0 as f64).clamp(0.0, 1.0);
+                let v = |x: usize, y: usize| cv[y * cw + x];
+                (1.0 - ay) * ((1.0 - ax) * v(x0, y0) + ax * v(x1, y0))
+                    + ay * ((1.0 - ax) * v(x0, y1) + ax * v(x1, y1))
+            })
+            .collect();
+        warm = Some((full_v, stage.model.noise));
+    }
+    let problem = Problem {
+        frames,
+        rays: &rays,
+        sample: (0..npx as u32).collect(),
+        size,
+        u,
+        options,
+        grid,
     };
-    // start: C from V = 1 by the paper's splat
-    let mut var = variance_table(&u, &model.noise);
-    model.c = c_step(&problem, &model, &var, false)?;
+    let stage = solve(
+        &problem,
+        warm,
+        options.tolerance,
+        options.max_iterations,
+        &|i, d| progress(coarse_iterations + i, d),
+    )?;
+    let Stage {
+        model,
+        tables,
+        iterations,
+        converged,
+        change,
+    } = stage;
+    let iterations = iterations + coarse_iterations;
+    // the final statistics with the final V and C
+    let vs = pass(&problem, &model, &tables, false)?.0;
+    finish(
+        &problem,
+        model,
+        vs,
+        Solved {
+            iterations,
+            converged,
+            change,
+            outside,
+            components: parts,
+        },
+        warnings,
+    )
+}
+
+/// How the solver ended.
+struct Solved {
+    iterations: usize,
+    converged: bool,
+    change: Vec<f64>,
+    /// Pixels outside the largest connected part (empty: all connected).
+    outside: Vec<bool>,
+    components: usize,
+}
+
+/// The result of one stage of the solver.
+struct Stage {
+    model: Model,
+    tables: Tables,
+    iterations: usize,
+    converged: bool,
+    change: Vec<f64>,
+}
+
+/// Alternates V and C steps (Anderson-accelerated) on `problem` until the RMS relative
+/// change of `V` is below `tolerance`. From scratch (`warm = None`) the noise model follows
+/// the residuals for the first iterations and outliers are dropped after a few; from a warm
+/// start (`V` and the noise model of a coarser stage) both are fixed from the start.
+fn solve(
+    problem: &Problem<'_>,
+    warm: Option<(Vec<f64>, NoiseModel)>,
+    tolerance: f64,
+    max_iterations: usize,
+    progress: &(dyn Fn(usize, f64) + Sync),
+) -> Result<Stage, PhotometricError> {
+    let u = problem.u;
+    let npx = problem.sample.len();
+    let warm_start = warm.is_some();
+    let (v0, noise0) = warm.unwrap_or_else(|| {
+        (
+            vec![1.0; npx],
+            NoiseModel {
+                read: 1.0,
+                shot: 0.1,
+                adc: 1.0,
+            },
+        )
+    });
+    let mut model = Model {
+        v: v0,
+        c: vec![0.0; cells(problem.grid)],
+        noise: noise0,
+        reject: warm_start,
+    };
+    // start: C from V (a Jacobi step from C = 0 is the paper's splat)
+    let mut tables = Tables::new(&u, &model.noise);
+    // (without outlier rejection: with C = 0 every observation would be one)
+    model.reject = false;
+    model.c = pass(problem, &model, &tables, true)?.1;
+    model.reject = warm_start;
     let mut anderson = Anderson::new(ANDERSON_MEMORY);
     let mut change = Vec::new();
     let mut converged = false;
     let mut iterations = 0;
     let ncell = model.c.len();
+    // outliers are dropped from the SETTLE-th iteration; the noise model follows the
+    // residuals for NOISE_FIT_ITERATIONS; from then on the problem is fixed
     const SETTLE: usize = 4;
-    for it in 0..options.max_iterations.max(1) {
+    const NOISE_FIT_ITERATIONS: usize = 7;
+    for it in 0..max_iterations.max(1) {
         iterations = it + 1;
         // V step with the current C
-        let vs = v_step(&problem, &model, &var)?;
+        let vs = pass(problem, &model, &tables, false)?.0;
         if vs.nobs == 0 {
             return Err(PhotometricError::Calibration(
                 "no pixel of any frame sees the calibration plane".into(),
             ));
         }
         let mut gv = model.v.clone();
-        for (p, g) in gv.iter_mut().enumerate().take(npx) {
-            if vs.den[p] > 0.0 {
-                *g = vs.num[p] / vs.den[p];
+        for ((g, n), d) in gv.iter_mut().zip(&vs.num).zip(&vs.den) {
+            if *d > 0.0 {
+                *g = n / d;
             }
         }
         // the gauge: mean V over observed pixels = 1 (C absorbs the scale)
@@ -856,13 +1017,16 @@ pub fn calibrate_vignette(
         }
         // C step (a Jacobi step towards the exact least squares) with the new V
         let old_v = std::mem::replace(&mut model.v, gv);
-        let mut gc = c_step(&problem, &model, &var, true)?;
-        for c in gc.iter_mut() {
-            *c *= mean as f32;
-        }
+        let scaled = Model {
+            v: model.v.clone(),
+            c: model.c.iter().map(|&c| c * mean as f32).collect(),
+            noise: model.noise,
+            reject: model.reject,
+        };
+        let gc = pass(problem, &scaled, &tables, true)?.1;
         // Anderson mixing of the whole iteration (V and C together)
         let mut x: Vec<f64> = old_v.clone();
-        x.extend(model.c.iter().map(|&c| c as f64 * mean));
+        x.extend(model.c.iter().map(|&c| c as f64));
         let mut g: Vec<f64> = model.v.clone();
         g.extend(gc.iter().map(|&c| c as f64));
         let next = if it >= 1 { anderson.step(&x, &g) } else { g };
@@ -887,53 +1051,32 @@ pub fn calibrate_vignette(
         model.c = new_c;
         change.push(delta);
         progress(iterations, delta);
-        if std::env::var_os("MONOVO_DEBUG").is_some() {
-            eprintln!(
-                "it {it} delta {delta:.3e} mean {mean:.4} chi2/n {:.3} rel {:.4} out {}",
-                vs.chi2 / vs.nobs as f64,
-                (vs.res2 / vs.pred2).sqrt(),
-                vs.outliers
-            );
+        // the noise model follows the residuals until the fit has settled; then outliers go
+        // and the problem stays fixed
+        if !warm_start && it < NOISE_FIT_ITERATIONS {
+            if let Some(nm) = fit_noise(&u, &vs.rss, &vs.rcnt) {
+                model.noise = nm;
+                tables = Tables::new(&u, &model.noise);
+            }
         }
-        // the noise model follows the residuals; outliers go once the fit has settled
-        if let Some(nm) = fit_noise(&u, &vs.rss, &vs.rcnt) {
-            model.noise = nm;
-            var = variance_table(&u, &model.noise);
-        }
-        if it + 1 == SETTLE {
+        if !warm_start && it + 1 == SETTLE {
             model.reject = true;
+        }
+        if !warm_start && (it + 1 == SETTLE || it + 1 == NOISE_FIT_ITERATIONS) {
             anderson.reset();
         }
-        if it + 1 > SETTLE && delta < options.tolerance {
+        if (warm_start || it + 1 > NOISE_FIT_ITERATIONS) && delta < tolerance {
             converged = true;
             break;
         }
     }
-    // the final statistics with the final V and C
-    let vs = v_step(&problem, &model, &var)?;
-    finish(
-        &problem,
+    Ok(Stage {
         model,
-        vs,
-        Solved {
-            iterations,
-            converged,
-            change,
-            outside,
-            components: parts,
-        },
-        warnings,
-    )
-}
-
-/// How the solver ended.
-struct Solved {
-    iterations: usize,
-    converged: bool,
-    change: Vec<f64>,
-    /// Pixels outside the largest connected part (empty: all connected).
-    outside: Vec<bool>,
-    components: usize,
+        tables,
+        iterations,
+        converged,
+        change,
+    })
 }
 
 /// Normalisation, the odd/even maps, the uncertainty, the smoothing and the checks of the

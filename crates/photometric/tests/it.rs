@@ -5,4 +5,5 @@ mod correct;
 mod files;
 mod marker;
 mod response;
+mod serde_types;
 mod vignette;

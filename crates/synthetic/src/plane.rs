@@ -6,7 +6,8 @@
 use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
 use crate::scene::texture;
 use crate::sensor::Sensor;
-use crate::trajectory::{mat_vec, Mat3, Vec3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
 use crate::Rng;
 
 /// The four 5-bit row words of the original ArUco dictionary; a marker's id holds 2 bits per
@@ -26,13 +27,31 @@ pub fn aruco_bitmap(id: u16) -> [[bool; 7]; 7] {
     b
 }
 
-/// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`.
+/// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`, stored as plain
+/// arrays (the `--poses` file's numbers).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlanePose {
     /// Rotation (row-major).
-    pub r: Mat3,
+    pub r: [[f64; 3]; 3],
     /// Translation.
-    pub t: Vec3,
+    pub t: [f64; 3],
+}
+
+impl PlanePose {
+    /// The rotation as a matrix.
+    pub fn rotation(&self) -> Matrix3<f64> {
+        Matrix3::from_fn(|i, j| self.r[i][j])
+    }
+
+    /// The translation as a vector.
+    pub fn translation(&self) -> Vector3<f64> {
+        Vector3::from(self.t)
+    }
+
+    /// A plane point (`z = 0`) in camera coordinates.
+    pub fn plane_to_camera(&self, x: f64, y: f64) -> Vector3<f64> {
+        self.rotation() * Vector3::new(x, y, 0.0) + self.translation()
+    }
 }
 
 /// Settings of a marker-plane sequence.
@@ -83,19 +102,6 @@ pub struct PlaneSequence {
     seed: u64,
 }
 
-fn normalize(v: Vec3) -> Vec3 {
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    [v[0] / n, v[1] / n, v[2] / n]
-}
-
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
 /// Energy scale of the plane sequences (`U`-units per ms and radiance).
 const GAIN: f64 = 34.0;
 
@@ -110,32 +116,35 @@ impl PlaneSequence {
             let tilt = rng.range(0.0, 40f64.to_radians());
             let az = rng.range(0.0, std::f64::consts::TAU);
             let d = rng.range(1.3, 2.4);
-            let p = [
+            let p = Vector3::new(
                 d * tilt.sin() * az.cos(),
                 d * tilt.sin() * az.sin(),
                 d * tilt.cos(),
-            ];
-            let target = [rng.range(-0.25, 0.25), rng.range(-0.25, 0.25), 0.0];
-            let z = normalize([target[0] - p[0], target[1] - p[1], target[2] - p[2]]);
+            );
+            let target = Vector3::new(rng.range(-0.25, 0.25), rng.range(-0.25, 0.25), 0.0);
+            let z = (target - p).normalize();
             let roll = rng.range(0.0, std::f64::consts::TAU);
             let helper = if z[0].abs() < 0.9 {
-                [1.0, 0.0, 0.0]
+                Vector3::x()
             } else {
-                [0.0, 1.0, 0.0]
+                Vector3::y()
             };
-            let x0 = normalize(cross(helper, z));
-            let y0 = cross(z, x0);
+            let x0 = helper.cross(&z).normalize();
+            let y0 = z.cross(&x0);
             let (s, c) = roll.sin_cos();
-            let x = [
-                c * x0[0] + s * y0[0],
-                c * x0[1] + s * y0[1],
-                c * x0[2] + s * y0[2],
-            ];
-            let y = cross(z, x);
+            let x = x0 * c + y0 * s;
+            let y = z.cross(&x);
             // rows of camera_from_plane are the camera axes in plane coordinates
-            let r = [x, y, z];
-            let t = [-mat_vec(&r, p)[0], -mat_vec(&r, p)[1], -mat_vec(&r, p)[2]];
-            poses.push(PlanePose { r, t });
+            let r = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
+                x.transpose(),
+                y.transpose(),
+                z.transpose(),
+            ]));
+            let t = -(r * p);
+            poses.push(PlanePose {
+                r: [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[(i, j)])),
+                t: t.into(),
+            });
             exposures_ms.push(rng.range(2.0, 6.5));
         }
         PlaneSequence {
@@ -171,9 +180,10 @@ impl PlaneSequence {
         let (w, h) = (self.config.width, self.config.height);
         let pose = self.poses[i];
         let t = self.exposures_ms[i];
+        let (r, tr) = (pose.rotation(), pose.translation());
         // plane normal and offset in the camera frame
-        let n = [pose.r[0][2], pose.r[1][2], pose.r[2][2]];
-        let nt = n[0] * pose.t[0] + n[1] * pose.t[1] + n[2] * pose.t[2];
+        let n = r.column(2).into_owned();
+        let nt = n.dot(&tr);
         self.config.sensor.capture(
             &self.response,
             w,
@@ -186,24 +196,15 @@ impl PlaneSequence {
                     rad += 0.25
                         * match self.camera.unproject(x as f64 + dx, y as f64 + dy) {
                             Some(ray) => {
-                                let nr = n[0] * ray[0] + n[1] * ray[1] + n[2] * ray[2];
+                                let ray = Vector3::from(ray);
+                                let nr = n.dot(&ray);
                                 let lam = nt / nr;
                                 if nr.abs() < 1e-12 || lam <= 0.0 {
                                     0.05
                                 } else {
-                                    let pc = [
-                                        lam * ray[0] - pose.t[0],
-                                        lam * ray[1] - pose.t[1],
-                                        lam * ray[2] - pose.t[2],
-                                    ];
                                     // plane = R^T (X - t)
-                                    let px = pose.r[0][0] * pc[0]
-                                        + pose.r[1][0] * pc[1]
-                                        + pose.r[2][0] * pc[2];
-                                    let py = pose.r[0][1] * pc[0]
-                                        + pose.r[1][1] * pc[1]
-                                        + pose.r[2][1] * pc[2];
-                                    self.radiance(px, py)
+                                    let plane = r.tr_mul(&(ray * lam - tr));
+                                    self.radiance(plane[0], plane[1])
                                 }
                             }
                             None => 0.05,
@@ -250,9 +251,8 @@ impl PlaneSequence {
         let p = self.poses[i];
         let pts = [[-0.5, 0.5], [0.5, 0.5], [0.5, -0.5], [-0.5, -0.5]];
         pts.map(|[x, y]| {
-            let c = mat_vec(&p.r, [x, y, 0.0]);
             self.camera
-                .project([c[0] + p.t[0], c[1] + p.t[1], c[2] + p.t[2]])
+                .project(p.plane_to_camera(x, y).into())
                 .unwrap_or([f64::NAN, f64::NAN])
         })
     }

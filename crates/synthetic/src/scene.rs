@@ -5,7 +5,9 @@ use rayon::prelude::*;
 
 use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
 use crate::sensor::Sensor;
-use crate::trajectory::{benchmark_path, mat_vec, Mat3, Path, PathConfig, Vec3};
+use nalgebra::Vector3;
+
+use crate::trajectory::{benchmark_path, Path, PathConfig};
 use crate::Rng;
 
 fn hash(seed: u64, x: i64, y: i64) -> f64 {
@@ -52,9 +54,9 @@ pub fn texture(seed: u64, x: f64, y: f64) -> f64 {
 #[derive(Clone, Copy, Debug)]
 pub struct Room {
     /// Lower corner.
-    pub min: Vec3,
+    pub min: Vector3<f64>,
     /// Upper corner.
-    pub max: Vec3,
+    pub max: Vector3<f64>,
     /// Texture seed.
     pub seed: u64,
 }
@@ -62,23 +64,21 @@ pub struct Room {
 impl Room {
     /// A room enclosing `path` with `margin` on every side.
     pub fn around(path: &Path, margin: f64, seed: u64) -> Room {
-        let mut min = [f64::INFINITY; 3];
-        let mut max = [f64::NEG_INFINITY; 3];
+        let mut min = Vector3::repeat(f64::INFINITY);
+        let mut max = Vector3::repeat(f64::NEG_INFINITY);
         for p in &path.positions {
-            for k in 0..3 {
-                min[k] = min[k].min(p[k]);
-                max[k] = max[k].max(p[k]);
-            }
+            min = min.inf(p);
+            max = max.sup(p);
         }
         Room {
-            min: [min[0] - margin, min[1] - margin, min[2] - margin * 0.4],
-            max: [max[0] + margin, max[1] + margin, max[2] + margin * 0.6],
+            min: min - Vector3::new(margin, margin, margin * 0.4),
+            max: max + Vector3::new(margin, margin, margin * 0.6),
             seed,
         }
     }
 
     /// Radiance seen from `origin` along `dir` (inside the room).
-    pub fn radiance(&self, origin: Vec3, dir: Vec3) -> f64 {
+    pub fn radiance(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> f64 {
         let mut best = f64::INFINITY;
         let mut axis = 0;
         for k in 0..3 {
@@ -99,11 +99,7 @@ impl Room {
         if !best.is_finite() {
             return 0.1;
         }
-        let hit = [
-            origin[0] + best * dir[0],
-            origin[1] + best * dir[1],
-            origin[2] + best * dir[2],
-        ];
+        let hit = origin + dir * best;
         let (a, b) = match axis {
             0 => (hit[1], hit[2]),
             1 => (hit[0], hit[2]),
@@ -208,7 +204,7 @@ impl SyntheticSequence {
     /// `jpeg_quality` is applied by whoever stores it).
     pub fn render(&self, i: usize) -> Vec<u8> {
         let (w, h) = (self.config.width, self.config.height);
-        let r: Mat3 = self.path.rotations[i];
+        let r = self.path.rotations[i];
         let origin = self.path.positions[i];
         let t = self.exposures_ms[i];
         self.config.sensor.capture(
@@ -219,7 +215,7 @@ impl SyntheticSequence {
             self.seed ^ (i as u64) << 20,
             |x, y| {
                 let rad = match self.camera.unproject(x as f64, y as f64) {
-                    Some(ray) => self.room.radiance(origin, mat_vec(&r, ray)),
+                    Some(ray) => self.room.radiance(&origin, &(r * Vector3::from(ray))),
                     None => 0.0,
                 };
                 GAIN * t * self.vignette[y * w + x] as f64 * rad
@@ -303,8 +299,8 @@ impl Sweep {
         let cam = FovCamera::dataset(width, height);
         let vig = ground_truth_vignette(width, height, seed);
         let room = Room {
-            min: [-6.0, -6.0, -4.0],
-            max: [6.0, 6.0, 4.0],
+            min: Vector3::new(-6.0, -6.0, -4.0),
+            max: Vector3::new(6.0, 6.0, 4.0),
             seed,
         };
         let r = crate::trajectory::camera_rotation(0.4, 0.1);
@@ -314,9 +310,10 @@ impl Sweep {
             .enumerate()
             .for_each(|(y, row)| {
                 for (x, b) in row.iter_mut().enumerate() {
+                    let origin = Vector3::new(0.5, -0.3, 0.2);
                     let rad = cam
                         .unproject(x as f64, y as f64)
-                        .map_or(0.0, |ray| room.radiance([0.5, -0.3, 0.2], mat_vec(&r, ray)));
+                        .map_or(0.0, |ray| room.radiance(&origin, &(r * Vector3::from(ray))));
                     *b = GAIN * vig[y * width + x] as f64 * rad;
                 }
             });

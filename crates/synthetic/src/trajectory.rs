@@ -7,85 +7,16 @@
 //! an arbitrary similarity of the whole estimate, keyframe subsets, lost tracking and
 //! backwards playback.
 
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
+
 use crate::rng::Rng;
 
-/// 3-vector.
+/// A 3-vector given as an array (drift axes).
 pub type Vec3 = [f64; 3];
-/// Row-major rotation matrix.
-pub type Mat3 = [[f64; 3]; 3];
 
 /// Rotation about an axis (normalised here) by `angle` radians.
-pub fn rotation(axis: Vec3, angle: f64) -> Mat3 {
-    let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-    let [x, y, z] = [axis[0] / n, axis[1] / n, axis[2] / n];
-    let (s, c) = angle.sin_cos();
-    let t = 1.0 - c;
-    [
-        [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
-        [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
-        [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
-    ]
-}
-
-/// `a * b`.
-pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for (i, row) in r.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..3).map(|k| a[i][k] * b[k][j]).sum();
-        }
-    }
-    r
-}
-
-/// `m * v`.
-pub fn mat_vec(m: &Mat3, v: Vec3) -> Vec3 {
-    [
-        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
-        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
-        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
-    ]
-}
-
-/// Unit quaternion `(qx, qy, qz, qw)` of a rotation matrix, `qw >= 0`.
-pub fn quaternion(r: &Mat3) -> [f64; 4] {
-    let tr = r[0][0] + r[1][1] + r[2][2];
-    let q = if tr > 0.0 {
-        let s = (tr + 1.0).sqrt() * 2.0;
-        [
-            (r[2][1] - r[1][2]) / s,
-            (r[0][2] - r[2][0]) / s,
-            (r[1][0] - r[0][1]) / s,
-            0.25 * s,
-        ]
-    } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
-        let s = (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt() * 2.0;
-        [
-            0.25 * s,
-            (r[0][1] + r[1][0]) / s,
-            (r[0][2] + r[2][0]) / s,
-            (r[2][1] - r[1][2]) / s,
-        ]
-    } else if r[1][1] > r[2][2] {
-        let s = (1.0 + r[1][1] - r[0][0] - r[2][2]).sqrt() * 2.0;
-        [
-            (r[0][1] + r[1][0]) / s,
-            0.25 * s,
-            (r[1][2] + r[2][1]) / s,
-            (r[0][2] - r[2][0]) / s,
-        ]
-    } else {
-        let s = (1.0 + r[2][2] - r[0][0] - r[1][1]).sqrt() * 2.0;
-        [
-            (r[0][2] + r[2][0]) / s,
-            (r[1][2] + r[2][1]) / s,
-            0.25 * s,
-            (r[1][0] - r[0][1]) / s,
-        ]
-    };
-    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let sgn = if q[3] < 0.0 { -1.0 } else { 1.0 };
-    q.map(|v| v / n * sgn)
+pub fn rotation(axis: Vec3, angle: f64) -> Rotation3<f64> {
+    Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::from(axis)), angle)
 }
 
 /// A ground-truth camera path, one pose per frame.
@@ -94,15 +25,15 @@ pub struct Path {
     /// Frame timestamps in seconds.
     pub times: Vec<f64>,
     /// Camera centres in the world (world z is up).
-    pub positions: Vec<Vec3>,
+    pub positions: Vec<Vector3<f64>>,
     /// `world_from_camera` rotations (camera x right, y down, z forward).
-    pub rotations: Vec<Mat3>,
+    pub rotations: Vec<Rotation3<f64>>,
     /// Frames in the start segment (the first ones) and in the end segment (the last ones).
     pub segment_frames: usize,
 }
 
 /// Parameters of [`benchmark_path`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PathConfig {
     /// Number of frames.
     pub frames: usize,
@@ -147,18 +78,18 @@ pub fn benchmark_path(seed: u64, config: &PathConfig) -> Path {
         rng.range(0.25, 0.45),
     );
     let loop_a = |u: f64| {
-        [
+        Vector3::new(
             a1 * (tau * 2.0 * u).sin(),
             a2 * (tau * 3.0 * u).sin(),
             a3 * (tau * u).sin(),
-        ]
+        )
     };
     let loop_b = |u: f64| {
-        [
+        Vector3::new(
             b1 * (tau * 3.0 * u).sin(),
             b2 * (tau * 2.0 * u).sin(),
             b3 * (tau * u).sin(),
-        ]
+        )
     };
     // the exploring loop: a large closed curve from the origin back to it with random harmonics
     let radius = rng.range(8.0, 12.0);
@@ -173,11 +104,11 @@ pub fn benchmark_path(seed: u64, config: &PathConfig) -> Path {
         })
         .collect();
     let explore = |v: f64| {
-        let mut p = [
+        let mut p = Vector3::new(
             radius * (1.0 - (tau * v).cos()),
             aspect * radius * (tau * v).sin(),
             0.8 * (tau * 2.0 * v).sin(),
-        ];
+        );
         for &(amp, f, zf) in &harm {
             let w = (std::f64::consts::PI * f * v).sin();
             p[1] += amp * w * (tau * v).sin();
@@ -197,16 +128,10 @@ pub fn benchmark_path(seed: u64, config: &PathConfig) -> Path {
         positions.push(p);
     }
     // normalise the length
-    let len: f64 = positions
-        .windows(2)
-        .map(|w| {
-            let d = [w[1][0] - w[0][0], w[1][1] - w[0][1], w[1][2] - w[0][2]];
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-        })
-        .sum();
+    let len: f64 = positions.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
     let s = config.length / len.max(1e-12);
     for p in positions.iter_mut() {
-        *p = p.map(|v| v * s);
+        *p *= s;
     }
     // orientation: heading follows the exploring motion, wiggles in the segments
     let heading0 = rng.range(0.0, tau);
@@ -241,18 +166,15 @@ pub fn benchmark_path(seed: u64, config: &PathConfig) -> Path {
 
 /// `world_from_camera` for a camera looking horizontally along `heading` (radians about the
 /// world z axis, which points up), tilted by `pitch`.
-pub fn camera_rotation(heading: f64, pitch: f64) -> Mat3 {
+pub fn camera_rotation(heading: f64, pitch: f64) -> Rotation3<f64> {
     let (sh, ch) = heading.sin_cos();
-    let fwd = [ch, sh, 0.0];
-    let right = [sh, -ch, 0.0];
-    let down = [0.0, 0.0, -1.0];
-    let base = [
-        [right[0], down[0], fwd[0]],
-        [right[1], down[1], fwd[1]],
-        [right[2], down[2], fwd[2]],
-    ];
+    let fwd = Vector3::new(ch, sh, 0.0);
+    let right = Vector3::new(sh, -ch, 0.0);
+    let down = Vector3::new(0.0, 0.0, -1.0);
+    // the camera's axes are the columns
+    let base = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[right, down, fwd]));
     // pitch about the camera's x axis
-    mat_mul(&base, &rotation([1.0, 0.0, 0.0], pitch))
+    base * Rotation3::from_axis_angle(&Vector3::x_axis(), pitch)
 }
 
 impl Path {
@@ -264,6 +186,14 @@ impl Path {
     /// Whether the path has no frame.
     pub fn is_empty(&self) -> bool {
         self.times.is_empty()
+    }
+
+    /// The `world_from_camera` pose of frame `i`.
+    pub fn world_from_camera(&self, i: usize) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::from(self.positions[i]),
+            UnitQuaternion::from_rotation_matrix(&self.rotations[i]),
+        )
     }
 
     /// Whether frame `i` lies in the start or end segment.
@@ -278,10 +208,10 @@ impl Path {
             let t = self.times[i];
             if self.in_segment(i) {
                 let p = self.positions[i];
-                let q = quaternion(&self.rotations[i]);
+                let q = canonical(UnitQuaternion::from_rotation_matrix(&self.rotations[i]));
                 s.push_str(&format!(
                     "{t:.6} {} {} {} {} {} {} {}\n",
-                    p[0], p[1], p[2], q[0], q[1], q[2], q[3]
+                    p[0], p[1], p[2], q.i, q.j, q.k, q.w
                 ));
             } else {
                 s.push_str(&format!("{t:.6} NaN NaN NaN NaN NaN NaN NaN\n"));
@@ -292,7 +222,7 @@ impl Path {
 }
 
 /// Drift injected into a synthetic estimate.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Drift {
     /// `(frame, factor)`: from this frame of the playback on, motion is scaled by `factor`.
     pub scale_jumps: Vec<(usize, f64)>,
@@ -307,7 +237,7 @@ pub struct Drift {
 }
 
 /// How a synthetic estimate is produced and written.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct EstimateConfig {
     /// The drift.
     pub drift: Drift,
@@ -342,9 +272,18 @@ pub struct EstimatedPose {
     /// Timestamp as written.
     pub t: f64,
     /// Position in the estimate's world.
-    pub position: Vec3,
-    /// Orientation `(qx, qy, qz, qw)`.
-    pub orientation: [f64; 4],
+    pub position: Vector3<f64>,
+    /// Orientation (`world_from_camera`), with `w >= 0`.
+    pub orientation: UnitQuaternion<f64>,
+}
+
+/// The quaternion with `w >= 0` (of the two that give a rotation).
+fn canonical(q: UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+    if q.w < 0.0 {
+        UnitQuaternion::new_unchecked(-q.into_inner())
+    } else {
+        q
+    }
 }
 
 /// Builds a drifted estimate of `path` in playback order.
@@ -359,14 +298,14 @@ pub fn estimate(path: &Path, config: &EstimateConfig, seed: u64) -> Vec<Estimate
     // arbitrary frame of the estimate
     let g_axis = [rng.normal(), rng.normal(), rng.normal()];
     let g_rot = rotation(g_axis, rng.range(0.0, std::f64::consts::PI));
-    let g_t = [
+    let g_t = Vector3::new(
         rng.range(-5.0, 5.0),
         rng.range(-5.0, 5.0),
         rng.range(-5.0, 5.0),
-    ];
+    );
     let g_s = config.world_scale;
     let mut s_acc = 1.0;
-    let mut r_acc: Mat3 = rotation([0.0, 0.0, 1.0], 0.0);
+    let mut r_acc = Rotation3::identity();
     let mut out = Vec::with_capacity(n);
     let mut cur = path.positions[order[0]];
     for (step, &i) in order.iter().enumerate() {
@@ -383,7 +322,7 @@ pub fn estimate(path: &Path, config: &EstimateConfig, seed: u64) -> Vec<Estimate
             }
             for &(f, axis, deg) in &config.drift.rotation_jumps {
                 if f == step {
-                    r_acc = mat_mul(&rotation(axis, deg.to_radians()), &r_acc);
+                    r_acc = rotation(axis, deg.to_radians()) * r_acc;
                 }
             }
             if config.drift.scale_walk > 0.0 {
@@ -392,33 +331,23 @@ pub fn estimate(path: &Path, config: &EstimateConfig, seed: u64) -> Vec<Estimate
             if config.drift.rotation_walk_deg > 0.0 {
                 let axis = [rng.normal(), rng.normal(), rng.normal()];
                 let ang = (config.drift.rotation_walk_deg * rng.normal()).to_radians();
-                r_acc = mat_mul(&rotation(axis, ang), &r_acc);
+                r_acc = rotation(axis, ang) * r_acc;
             }
-            let prev = path.positions[order[step - 1]];
-            let p = path.positions[i];
-            let d = [p[0] - prev[0], p[1] - prev[1], p[2] - prev[2]];
-            let d = mat_vec(&r_acc, d);
-            cur = [
-                cur[0] + s_acc * d[0],
-                cur[1] + s_acc * d[1],
-                cur[2] + s_acc * d[2],
-            ];
+            let d = path.positions[i] - path.positions[order[step - 1]];
+            cur += r_acc * d * s_acc;
         }
         if step % config.keyframe_every.max(1) != 0 {
             continue;
         }
-        let noisy = [
-            cur[0] + config.drift.position_noise * rng.normal(),
-            cur[1] + config.drift.position_noise * rng.normal(),
-            cur[2] + config.drift.position_noise * rng.normal(),
-        ];
-        let pw = mat_vec(&g_rot, noisy);
-        let position = [
-            g_s * pw[0] + g_t[0],
-            g_s * pw[1] + g_t[1],
-            g_s * pw[2] + g_t[2],
-        ];
-        let rot = mat_mul(&g_rot, &mat_mul(&r_acc, &path.rotations[i]));
+        let noise = config.drift.position_noise;
+        let noisy = cur
+            + Vector3::new(
+                noise * rng.normal(),
+                noise * rng.normal(),
+                noise * rng.normal(),
+            );
+        let position = g_rot * noisy * g_s + g_t;
+        let rot = g_rot * r_acc * path.rotations[i];
         let t = if config.backwards && config.backwards_epoch_times {
             2e9 - path.times[i]
         } else {
@@ -427,7 +356,7 @@ pub fn estimate(path: &Path, config: &EstimateConfig, seed: u64) -> Vec<Estimate
         out.push(EstimatedPose {
             t,
             position,
-            orientation: quaternion(&rot),
+            orientation: canonical(UnitQuaternion::from_rotation_matrix(&rot)),
         });
     }
     out
@@ -440,7 +369,7 @@ pub fn tum_text(poses: &[EstimatedPose]) -> String {
         let q = p.orientation;
         s.push_str(&format!(
             "{:.6} {} {} {} {} {} {} {}\n",
-            p.t, p.position[0], p.position[1], p.position[2], q[0], q[1], q[2], q[3]
+            p.t, p.position[0], p.position[1], p.position[2], q.i, q.j, q.k, q.w
         ));
     }
     s

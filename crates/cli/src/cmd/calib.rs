@@ -92,22 +92,42 @@ pub struct ResponseArgs {
     /// Replace existing outputs.
     #[arg(long)]
     pub force: bool,
+    /// Calibration options from a TOML file (its `[response]` table; see data/calib.toml);
+    /// the flags below win over it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// Iteration limit.
-    #[arg(long, default_value_t = ResponseOptions::default().max_iterations)]
-    pub max_iterations: usize,
+    #[arg(long, value_name = "N", help = with_default(
+        "Iteration limit",
+        ResponseOptions::default().max_iterations,
+    ))]
+    pub max_iterations: Option<usize>,
     /// Stop when U changes by less than this many grey values between iterations.
-    #[arg(long, default_value_t = ResponseOptions::default().tolerance)]
-    pub tolerance: f64,
+    #[arg(long, value_name = "GREY", help = with_default(
+        "Stop when U changes by less than this many grey values between iterations",
+        ResponseOptions::default().tolerance,
+    ))]
+    pub tolerance: Option<f64>,
     /// Smallest smoothing scale of the prior, in grey values.
-    #[arg(long, default_value_t = ResponseOptions::default().smoothness)]
-    pub smoothness: f64,
+    #[arg(long, value_name = "GREY", help = with_default(
+        "Smallest smoothing scale of the prior, in grey values",
+        ResponseOptions::default().smoothness,
+    ))]
+    pub smoothness: Option<f64>,
     /// Observations enter only where the model predicts a grey value this many noise
     /// standard deviations inside 0..255.
-    #[arg(long, default_value_t = ResponseOptions::default().censor_sigmas)]
-    pub censor_sigmas: f64,
+    #[arg(long, value_name = "SIGMAS", help = with_default(
+        "Observations enter only where the model predicts a grey value this many noise \
+         standard deviations inside 0..255",
+        ResponseOptions::default().censor_sigmas,
+    ))]
+    pub censor_sigmas: Option<f64>,
     /// Radius (pixels) dropped around saturated pixels.
-    #[arg(long, default_value_t = ResponseOptions::default().saturation_border)]
-    pub saturation_border: usize,
+    #[arg(long, value_name = "PX", help = with_default(
+        "Radius (pixels) dropped around saturated pixels",
+        ResponseOptions::default().saturation_border,
+    ))]
+    pub saturation_border: Option<usize>,
     /// Plot U with its 2-sigma band, the standard errors and the observations (.png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
@@ -137,17 +157,28 @@ pub struct VignetteArgs {
     /// Id of the marker (original ArUco dictionary).
     #[arg(long, default_value_t = 213)]
     pub marker_id: u16,
+    /// Calibration options from a TOML file (its `[vignette]` table; see data/calib.toml);
+    /// the flags below win over it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// Iteration limit.
-    #[arg(long, default_value_t = photometric::VignetteOptions::default().max_iterations)]
-    pub max_iterations: usize,
+    #[arg(long, value_name = "N", help = with_default(
+        "Iteration limit",
+        photometric::VignetteOptions::default().max_iterations,
+    ))]
+    pub max_iterations: Option<usize>,
     /// Smoothing of vignette.png (Gaussian standard deviation in pixels) instead of the one
     /// chosen by cross-validation; 0 writes the raw map.
     #[arg(long, value_name = "PX")]
     pub smoothing: Option<f64>,
     /// Registration uncertainty of the plane in pixels (weights observations at edges of
     /// the plane's texture).
-    #[arg(long, value_name = "PX", default_value_t = photometric::VignetteOptions::default().registration_px)]
-    pub registration_px: f64,
+    #[arg(long, value_name = "PX", help = with_default(
+        "Registration uncertainty of the plane in pixels (weights observations at edges of \
+         the plane's texture)",
+        photometric::VignetteOptions::default().registration_px,
+    ))]
+    pub registration_px: Option<f64>,
     /// Plot the maps, their cross-sections with 2-sigma bands, the standard error and the
     /// coverage (.png or .svg).
     #[arg(long, value_name = "FILE")]
@@ -155,6 +186,102 @@ pub struct VignetteArgs {
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+}
+
+/// A flag's help with the default it takes when neither the flag nor `--config` sets it.
+fn with_default(text: &str, default: impl std::fmt::Display) -> String {
+    format!("{text} [default: {default}, or from --config]")
+}
+
+/// The options of `--config FILE`: a `[response]` and a `[vignette]` table with any fields
+/// of [`ResponseOptions`] and [`photometric::VignetteOptions`] (data/calib.toml lists them
+/// all with their defaults). Absent fields and tables keep the defaults; an unknown field is
+/// an error naming it.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibConfig {
+    /// Options of `monovo calib response`.
+    pub response: ResponseOptions,
+    /// Options of `monovo calib vignette`.
+    pub vignette: photometric::VignetteOptions,
+}
+
+impl CalibConfig {
+    /// Parses a config file's text.
+    pub fn parse(text: &str) -> Result<CalibConfig, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    /// Reads the config file, or gives the defaults without one.
+    pub fn load(path: Option<&Path>) -> Result<CalibConfig> {
+        let Some(path) = path else {
+            return Ok(CalibConfig::default());
+        };
+        let text = dataset_io::read_text(path)?;
+        CalibConfig::parse(&text).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: not a calibration config: {}",
+                path.display(),
+                e.to_string().trim_end()
+            )
+        })
+    }
+}
+
+/// The response options: the defaults, then `--config`, then the flags; clamped to sane
+/// values.
+pub fn response_options(a: &ResponseArgs) -> Result<ResponseOptions> {
+    let mut o = CalibConfig::load(a.config.as_deref())?.response;
+    if let Some(v) = a.max_iterations {
+        o.max_iterations = v;
+    }
+    if let Some(v) = a.tolerance {
+        o.tolerance = v;
+    }
+    if let Some(v) = a.smoothness {
+        o.smoothness = v;
+    }
+    if let Some(v) = a.censor_sigmas {
+        o.censor_sigmas = v;
+    }
+    if let Some(v) = a.saturation_border {
+        o.saturation_border = v;
+    }
+    o.max_iterations = o.max_iterations.max(1);
+    o.smoothness = o.smoothness.max(0.0);
+    o.censor_sigmas = o.censor_sigmas.max(0.5);
+    o.check()
+        .with_context(|| options_source(a.config.as_deref()))?;
+    Ok(o)
+}
+
+/// The vignette options: the defaults, then `--config`, then the flags; clamped to sane
+/// values.
+pub fn vignette_options(a: &VignetteArgs) -> Result<photometric::VignetteOptions> {
+    let mut o = CalibConfig::load(a.config.as_deref())?.vignette;
+    if let Some(v) = a.max_iterations {
+        o.max_iterations = v;
+    }
+    if let Some(v) = a.smoothing {
+        o.smoothing_px = Some(v);
+    }
+    if let Some(v) = a.registration_px {
+        o.registration_px = v;
+    }
+    o.max_iterations = o.max_iterations.max(1);
+    o.smoothing_px = o.smoothing_px.map(|s| s.max(0.0));
+    o.registration_px = o.registration_px.max(0.0);
+    o.check()
+        .with_context(|| options_source(a.config.as_deref()))?;
+    Ok(o)
+}
+
+/// Where the calibration options came from, for an error about one of them.
+fn options_source(config: Option<&Path>) -> String {
+    match config {
+        Some(p) => format!("the calibration options (the flags and {})", p.display()),
+        None => "the calibration options".into(),
+    }
 }
 
 /// `stem_suffix.ext` beside `path` (`vignette.png` -> `vignette_raw.png`).
@@ -240,9 +367,11 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     let std_path = sibling(&a.output, "_std");
     let mut outs: Vec<&Path> = vec![&a.output, &std_path];
     if let Some(p) = &a.plot {
+        plot::format_of(p)?;
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;
+    let opts = response_options(a)?;
     let seq = crate::cmd::open_sequence(&a.sequence)?;
     if seq.len() < 2 {
         bail!(
@@ -256,14 +385,6 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     if !a.json {
         outln!("{report}")?;
     }
-    let opts = ResponseOptions {
-        max_iterations: a.max_iterations.max(1),
-        tolerance: a.tolerance,
-        smoothness: a.smoothness.max(0.0),
-        censor_sigmas: a.censor_sigmas.max(0.5),
-        saturation_border: a.saturation_border,
-        ..ResponseOptions::default()
-    };
     let pb = progress::spinner("calibrating");
     let cal = calibrate_response(&mut frames, &exposures, &opts, &|i, change| {
         pb.set_message(format!(
@@ -410,7 +531,11 @@ pub fn response_figure(
             PALETTE[2],
         ));
     }
-    let mut c3 = Chart::new("observations", "grey value I", "observations (log10)");
+    let mut c3 = Chart::new(
+        "observations",
+        "grey value I",
+        "log10 of the number of observations",
+    );
     c3.legend = Some(Corner::TopRight);
     c3.x_range = Some([0.0, 255.0]);
     let steps = |h: &[u64]| -> Vec<[f64; 2]> {
@@ -497,12 +622,21 @@ pub fn vignette_figure(
         })
     };
     let sd = cal.std_error.data();
-    let sd_max = sd.iter().copied().fold(0.0f32, f32::max).max(1e-6);
+    // the colour scale of the standard error ends at its 99th percentile: a few border
+    // pixels with little data would otherwise leave the rest of the map one colour
+    let mut sd_sorted: Vec<f32> = sd.iter().copied().filter(|v| v.is_finite()).collect();
+    sd_sorted.sort_unstable_by(f32::total_cmp);
+    let sd_max = sd_sorted
+        .get(sd_sorted.len() * 99 / 100)
+        .copied()
+        .unwrap_or(0.0)
+        .max(1e-6);
     let counts: Vec<f32> = cal.counts.data().iter().map(|&c| c as f32).collect();
     let c_max = counts.iter().copied().fold(0.0f32, f32::max).max(1.0);
-    let section = |title: &str, axis: &str, n: usize, at: &dyn Fn(usize) -> usize| {
+    let section = |title: &str, axis: &str, n: usize, at: &dyn Fn(usize) -> usize, legend: bool| {
         let mut c = Chart::new(title, axis, "V");
-        c.legend = Some(Corner::BottomRight);
+        // one legend for both cross-sections
+        c.legend = legend.then_some(Corner::BottomRight);
         let val = |img: &Image<f32>, i: usize| img.data()[at(i)] as f64;
         c.series.push(Series::band(
             "recommended, 2 sigma",
@@ -540,7 +674,7 @@ pub fn vignette_figure(
     };
     let fig = Figure {
         width: 1650,
-        height: 1000,
+        height: 900,
         panels: vec![
             (
                 heat(
@@ -549,37 +683,37 @@ pub fn vignette_figure(
                     [0.0, 1.0],
                     "V",
                 ),
-                [0.0, 0.0, 0.34, 0.5],
+                [0.0, 0.0, 0.34, 0.42],
             ),
             (
                 heat(
-                    "standard error of V",
+                    "standard error of V (colours clipped at 99%)",
                     sd.to_vec(),
                     [0.0, sd_max],
                     "standard error",
                 ),
-                [0.34, 0.0, 0.33, 0.5],
+                [0.34, 0.0, 0.33, 0.42],
             ),
             (
                 heat("coverage", counts, [0.0, c_max], "observations per pixel"),
-                [0.67, 0.0, 0.33, 0.5],
+                [0.67, 0.0, 0.33, 0.42],
             ),
             (
-                section("middle row", "x (pixels)", w, &|x| (h / 2) * w + x),
-                [0.0, 0.5, 0.5, 0.5],
+                section("middle row", "x (pixels)", w, &|x| (h / 2) * w + x, true),
+                [0.0, 0.42, 0.5, 0.58],
             ),
             (
-                section("middle column", "y (pixels)", h, &|y| y * w + w / 2),
-                [0.5, 0.5, 0.5, 0.5],
+                section("middle column", "y (pixels)", h, &|y| y * w + w / 2, false),
+                [0.5, 0.42, 0.5, 0.58],
             ),
         ],
     };
     plot::save(&fig, path)
 }
 
-/// The frames with a plane pose (index, exposure, pose) and the count of frames skipped
-/// for each reason.
-type PlanePoses = (
+/// Frames with a plane pose (index, exposure in ms, pose) and the count of skipped frames
+/// per reason.
+type PosedFrames = (
     Vec<(usize, f64, photometric::PlanePose)>,
     std::collections::BTreeMap<&'static str, usize>,
 );
@@ -589,7 +723,7 @@ fn plane_poses(
     a: &VignetteArgs,
     seq: &Sequence,
     cam: &camera_model::CameraFile,
-) -> Result<PlanePoses> {
+) -> Result<PosedFrames> {
     use camera_model::{output_intrinsics, OutputMode, RectifyMap};
     use photometric::marker::PoseFromMarker;
     let rows = &seq.times().rows;
@@ -658,10 +792,13 @@ pub struct VignetteRun {
     pub used: usize,
     /// Frames without one, by reason.
     pub skipped: std::collections::BTreeMap<&'static str, usize>,
+    /// The options used.
+    pub options: photometric::VignetteOptions,
 }
 
 /// Poses (from the marker or `--poses`) and the calibration, without writing anything.
 pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
+    let opts = vignette_options(a)?;
     let seq = crate::cmd::open_sequence(&a.sequence)?;
     let cam_path = a.sequence.join("camera.txt");
     let Some(cam) = seq.camera() else {
@@ -713,12 +850,6 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
             }
         )?;
     }
-    let opts = photometric::VignetteOptions {
-        max_iterations: a.max_iterations.max(1),
-        smoothing_px: a.smoothing.map(|s| s.max(0.0)),
-        registration_px: a.registration_px.max(0.0),
-        ..photometric::VignetteOptions::default()
-    };
     let bytes = frames.len() * cam.input_size.pixels();
     let decoded = if bytes <= DECODED_CACHE_BYTES {
         let idx: Vec<usize> = frames.iter().map(|f| f.0).collect();
@@ -767,6 +898,7 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
         cal,
         used: source.frames.len(),
         skipped,
+        options: opts,
     })
 }
 
@@ -776,10 +908,16 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
     let cov_path = sibling(&a.output, "_coverage");
     let mut outs: Vec<&Path> = vec![&a.output, &raw_path, &std_path, &cov_path];
     if let Some(p) = &a.plot {
+        plot::format_of(p)?;
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;
-    let VignetteRun { cal, used, skipped } = calibrate_vignette_sequence(a)?;
+    let VignetteRun {
+        cal,
+        used,
+        skipped,
+        options,
+    } = calibrate_vignette_sequence(a)?;
     let skipped_total: usize = skipped.values().sum();
     for w in &cal.warnings {
         crate::warn(format_args!("{w}"));
@@ -911,7 +1049,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         outln!(
             "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out",
             100.0 * cal.coverage,
-            photometric::VignetteOptions::default().min_observations,
+            options.min_observations,
             cal.smoothing.defects
         )?;
         outln!(
@@ -941,5 +1079,137 @@ pub fn run(args: &Args) -> Result<()> {
     match &args.what {
         What::Response(a) => run_response(a),
         What::Vignette(a) => run_vignette(a),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    /// The example config in the repository.
+    const EXAMPLE: &str = include_str!("../../../../data/calib.toml");
+
+    #[derive(clap::Parser)]
+    struct Response {
+        #[command(flatten)]
+        args: ResponseArgs,
+    }
+
+    #[derive(clap::Parser)]
+    struct Vignette {
+        #[command(flatten)]
+        args: VignetteArgs,
+    }
+
+    fn json<T: serde::Serialize>(v: &T) -> serde_json::Value {
+        serde_json::to_value(v).unwrap()
+    }
+
+    #[test]
+    fn the_example_config_lists_every_option_with_its_default() {
+        let c = CalibConfig::parse(EXAMPLE).unwrap();
+        assert_eq!(json(&c.response), json(&ResponseOptions::default()));
+        assert_eq!(
+            json(&c.vignette),
+            json(&photometric::VignetteOptions::default())
+        );
+        // a new option must be added to the example (commented out when it has no value)
+        for (table, options) in [
+            ("response", json(&ResponseOptions::default())),
+            ("vignette", json(&photometric::VignetteOptions::default())),
+        ] {
+            let section = EXAMPLE.split(&format!("[{table}]")).nth(1).unwrap();
+            let section = section.split("\n[").next().unwrap();
+            for key in options.as_object().unwrap().keys() {
+                assert!(
+                    section.contains(&format!("\n{key} = "))
+                        || section.contains(&format!("\n# {key} = ")),
+                    "data/calib.toml has no `{key}` in [{table}]"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_are_errors_that_name_them() {
+        let e = CalibConfig::parse("[response]\nmax_iteration = 3\n").unwrap_err();
+        assert!(e.to_string().contains("max_iteration"), "{e}");
+        let e = CalibConfig::parse("[respons]\ntolerance = 0.1\n").unwrap_err();
+        assert!(e.to_string().contains("respons"), "{e}");
+        let e = CalibConfig::parse("[vignette]\ngrid = \"fine\"\n").unwrap_err();
+        assert!(e.to_string().contains("grid"), "{e}");
+        // an empty file is the defaults
+        let c = CalibConfig::parse("").unwrap();
+        assert_eq!(
+            json(&c.vignette),
+            json(&photometric::VignetteOptions::default())
+        );
+    }
+
+    #[test]
+    fn flags_win_over_the_config_and_the_config_over_the_defaults() {
+        let dir = std::env::temp_dir().join(format!("monovo_calib_config_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("calib.toml");
+        std::fs::write(
+            &file,
+            "[response]\nmax_iterations = 7\nmin_count = 3\ntolerance = 0.5\n\n\
+             [vignette]\ngrid = 400\nsmoothing_px = 1.5\nregistration_px = 0.5\n",
+        )
+        .unwrap();
+        let f = file.to_str().unwrap();
+        let r = Response::parse_from([
+            "t",
+            "sweep",
+            "-o",
+            "p.txt",
+            "--config",
+            f,
+            "--tolerance",
+            "0.2",
+        ]);
+        let o = response_options(&r.args).unwrap();
+        assert_eq!((o.max_iterations, o.min_count), (7, 3), "from the file");
+        assert_eq!(o.tolerance, 0.2, "the flag wins");
+        assert_eq!(
+            o.smoothness,
+            ResponseOptions::default().smoothness,
+            "the default"
+        );
+        let r = Response::parse_from(["t", "sweep", "-o", "p.txt"]);
+        assert_eq!(
+            json(&response_options(&r.args).unwrap()),
+            json(&ResponseOptions::default())
+        );
+        let v = Vignette::parse_from([
+            "t",
+            "wall",
+            "-o",
+            "v.png",
+            "--config",
+            f,
+            "--smoothing",
+            "0",
+        ]);
+        let o = vignette_options(&v.args).unwrap();
+        assert_eq!((o.grid, o.registration_px), (400, 0.5));
+        assert_eq!(o.smoothing_px, Some(0.0));
+        assert_eq!(
+            o.max_iterations,
+            photometric::VignetteOptions::default().max_iterations
+        );
+        // a missing file is named
+        let v = Vignette::parse_from([
+            "t",
+            "wall",
+            "-o",
+            "v.png",
+            "--config",
+            "/nonexistent/c.toml",
+        ]);
+        let e = vignette_options(&v.args).unwrap_err();
+        assert!(format!("{e:#}").contains("/nonexistent/c.toml"), "{e:#}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -100,7 +100,7 @@ fn metric_study(seed: u64, path: &Path) -> Result<()> {
     let mut c = Chart::new(
         "metric study: where the drift happens (dashed: scale x0.8, solid: rotation 10 deg)",
         "time of the jump (fraction of the sequence)",
-        "error",
+        "error (ground-truth length unit)",
     );
     c.legend = Some(Corner::TopRight);
     c.x_range = Some([0.0, 1.0]);
@@ -337,9 +337,10 @@ pub fn run(args: &Args) -> Result<()> {
         pcalib: None,
         poses: None,
         marker_id: 213,
-        max_iterations: photometric::VignetteOptions::default().max_iterations,
+        config: None,
+        max_iterations: None,
         smoothing: None,
-        registration_px: photometric::VignetteOptions::default().registration_px,
+        registration_px: None,
         plot: None,
         json: true,
     })?;

@@ -7,6 +7,8 @@ use eval_metrics::{
     detect_format, evaluate, parse_euroc, parse_kitti, parse_tum, Evaluation, GroundTruth,
     Trajectory, TrajectoryFormat,
 };
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde::Serialize;
 
 use crate::plot::{self, Chart, Corner, Figure, Panel, Series, PALETTE};
 
@@ -95,31 +97,58 @@ pub fn load_ground_truth(path: &Path) -> Result<GroundTruth> {
     GroundTruth::parse(&text).with_context(|| format!("the ground truth {}", path.display()))
 }
 
-fn num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::Value::Null
-    }
+/// `None` for an infinite or NaN metric (JSON `null`).
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }
 
-/// The JSON object of one evaluation.
-pub fn evaluation_json(e: &Evaluation) -> serde_json::Value {
-    let m = &e.metrics;
-    serde_json::json!({
-        "status": if e.is_ok() { "ok" } else { "failed" },
-        "reason": e.failure.as_ref().map(|f| f.to_string()),
-        "e_align": num(m.e_align),
-        "e_s": num(m.e_s),
-        "e_r": num(m.e_r),
-        "e_t": num(m.e_t),
-        "e_rmse": num(m.e_rmse),
-        "rmse_start": num(m.rmse_start),
-        "rmse_end": num(m.rmse_end),
-        "poses": e.poses,
-        "poses_start": e.poses_start,
-        "poses_end": e.poses_end,
-    })
+/// The `--json` output of `monovo eval`: one object, metrics `null` where infinite.
+#[derive(Debug, Serialize)]
+pub struct EvaluationJson {
+    /// `ok` or `failed`.
+    pub status: &'static str,
+    /// Why the run failed (`null` when it succeeded).
+    pub reason: Option<String>,
+    /// Alignment error.
+    pub e_align: Option<f64>,
+    /// Scale drift (multiplier).
+    pub e_s: Option<f64>,
+    /// Rotation drift in degrees.
+    pub e_r: Option<f64>,
+    /// Translation drift.
+    pub e_t: Option<f64>,
+    /// Joint alignment RMSE.
+    pub e_rmse: Option<f64>,
+    /// Start-segment RMSE.
+    pub rmse_start: Option<f64>,
+    /// End-segment RMSE.
+    pub rmse_end: Option<f64>,
+    /// Estimated poses.
+    pub poses: usize,
+    /// Poses in the start alignment.
+    pub poses_start: usize,
+    /// Poses in the end alignment.
+    pub poses_end: usize,
+}
+
+impl From<&Evaluation> for EvaluationJson {
+    fn from(e: &Evaluation) -> Self {
+        let m = &e.metrics;
+        EvaluationJson {
+            status: if e.is_ok() { "ok" } else { "failed" },
+            reason: e.failure.as_ref().map(|f| f.to_string()),
+            e_align: finite(m.e_align),
+            e_s: finite(m.e_s),
+            e_r: finite(m.e_r),
+            e_t: finite(m.e_t),
+            e_rmse: finite(m.e_rmse),
+            rmse_start: finite(m.rmse_start),
+            rmse_end: finite(m.rmse_end),
+            poses: e.poses,
+            poses_start: e.poses_start,
+            poses_end: e.poses_end,
+        }
+    }
 }
 
 fn fmt(v: f64, digits: usize) -> String {
@@ -133,6 +162,7 @@ fn fmt(v: f64, digits: usize) -> String {
 /// Runs `monovo eval`.
 pub fn run(args: &Args) -> Result<()> {
     if let Some(p) = &args.plot {
+        plot::format_of(p)?;
         dataset_io::check_output_file(p, args.force)?;
     }
     let gt = load_ground_truth(&args.gt)?;
@@ -142,7 +172,7 @@ pub fn run(args: &Args) -> Result<()> {
         alignment_figure(&e, &gt, p)?;
     }
     if args.json {
-        outln!("{}", evaluation_json(&e))?;
+        outln!("{}", serde_json::to_string(&EvaluationJson::from(&e))?)?;
         return Ok(());
     }
     let m = &e.metrics;
@@ -182,26 +212,22 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// The two principal horizontal axes of a point set: the plane of largest spread.
-fn top_down_axes(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+/// The two principal axes of a point set (the plane of largest spread), by the eigen
+/// decomposition of its scatter matrix.
+fn top_down_axes(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
     let n = points.len().max(1) as f64;
-    let mut mean = [0.0; 3];
-    for p in points {
-        for k in 0..3 {
-            mean[k] += p[k] / n;
-        }
-    }
-    let mut c = [[0.0; 3]; 3];
-    for p in points {
-        let d = [p[0] - mean[0], p[1] - mean[1], p[2] - mean[2]];
-        for i in 0..3 {
-            for j in 0..3 {
-                c[i][j] += d[i] * d[j];
-            }
-        }
-    }
-    let (u, _, _) = eval_metrics::linalg::svd3(&c);
-    ([u[0][0], u[1][0], u[2][0]], [u[0][1], u[1][1], u[2][1]])
+    let mean: Vector3<f64> = points.iter().sum::<Vector3<f64>>() / n;
+    let scatter: Matrix3<f64> = points
+        .iter()
+        .map(|p| (p - mean) * (p - mean).transpose())
+        .sum();
+    let eig = SymmetricEigen::new(scatter);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    (
+        eig.eigenvectors.column(order[0]).into_owned(),
+        eig.eigenvectors.column(order[1]).into_owned(),
+    )
 }
 
 /// The paper's alignment figure: ground truth (dashed green), the trajectory aligned to the
@@ -215,15 +241,10 @@ pub fn alignment_figure(e: &Evaluation, gt: &GroundTruth, path: &Path) -> Result
             e.failure.as_ref().map_or(String::new(), |f| f.to_string())
         );
     };
-    let start_pts: Vec<[f64; 3]> = e.positions.iter().map(|p| s.apply(*p)).collect();
-    let end_pts: Vec<[f64; 3]> = e.positions.iter().map(|p| en.apply(*p)).collect();
+    let start_pts: Vec<Vector3<f64>> = e.positions.iter().map(|p| s.apply(p)).collect();
+    let end_pts: Vec<Vector3<f64>> = e.positions.iter().map(|p| en.apply(p)).collect();
     let (ax, ay) = top_down_axes(&start_pts);
-    let proj = |p: &[f64; 3]| {
-        [
-            p[0] * ax[0] + p[1] * ax[1] + p[2] * ax[2],
-            p[0] * ay[0] + p[1] * ay[1] + p[2] * ay[2],
-        ]
-    };
+    let proj = |p: &Vector3<f64>| [p.dot(&ax), p.dot(&ay)];
     let gt_rows: Vec<[f64; 2]> = gt
         .positions()
         .iter()
@@ -260,7 +281,11 @@ pub fn alignment_figure(e: &Evaluation, gt: &GroundTruth, path: &Path) -> Result
         ([b[0] - pad, b[1] + pad], [b[2] - pad, b[3] + pad])
     };
     let mk = |title: &str, range: Option<([f64; 2], [f64; 2])>, legend: bool| {
-        let mut c = Chart::new(title, "x (ground-truth frame, top-down)", "y");
+        let mut c = Chart::new(
+            title,
+            "top-down x (ground-truth length unit)",
+            "top-down y (ground-truth length unit)",
+        );
         c.equal_aspect = true;
         c.legend = legend.then_some(Corner::TopRight);
         c.series.push(Series::line(

@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use dataset_io::{scan_ground_truths, scan_results, RunFile};
 use eval_metrics::{evaluate_batch, write_csv, Direction, GroundTruth, RunKey};
 use rayon::prelude::*;
+use serde::Serialize;
 
 use crate::cmd::eval::{load_ground_truth, load_trajectory, FormatArg};
 use crate::progress;
@@ -21,8 +22,8 @@ Layout:
 
 Every run is evaluated as `monovo eval` does, in parallel. Files that do not fit the layout
 are listed and skipped, never mixed in. results.csv has the columns
-method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses
-(failed runs have status `failed` and `inf` metrics); feed it to `monovo plot`.
+method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses,reason
+(failed runs have status `failed`, `inf` metrics and the reason); feed it to `monovo plot`.
 
 Example:
   monovo eval-batch --dataset tum-mono --results results -o results.csv
@@ -46,6 +47,34 @@ pub struct Args {
     /// Print a JSON summary (runs, failed, per method, stray files) instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Runs and failures of one method in the `--json` summary.
+#[derive(Debug, Serialize)]
+struct MethodJson {
+    runs: usize,
+    failed: usize,
+}
+
+/// A file of the results tree that was skipped, and why.
+#[derive(Debug, Serialize)]
+struct StrayJson {
+    path: String,
+    reason: String,
+}
+
+/// The `--json` output of `monovo eval-batch`.
+#[derive(Debug, Serialize)]
+struct BatchJson {
+    runs: usize,
+    failed: usize,
+    unreadable: usize,
+    methods: std::collections::BTreeMap<String, MethodJson>,
+    sequences: usize,
+    stray: Vec<StrayJson>,
+    output: String,
+    /// Wall time in seconds.
+    seconds: f64,
 }
 
 /// What `monovo eval-batch` wrote.
@@ -178,21 +207,26 @@ pub fn run(args: &Args) -> Result<()> {
     }
     let failed = records.iter().filter(|r| !r.is_ok()).count();
     if args.json {
-        let methods: serde_json::Map<String, serde_json::Value> = per_method
-            .iter()
-            .map(|(m, (n, f))| (m.to_string(), serde_json::json!({"runs": n, "failed": f})))
-            .collect();
-        let obj = serde_json::json!({
-            "runs": records.len(),
-            "failed": failed,
-            "unreadable": unreadable,
-            "methods": methods,
-            "sequences": sequences,
-            "stray": stray.iter().map(|(p, why)| serde_json::json!({"path": p.display().to_string(), "reason": why})).collect::<Vec<_>>(),
-            "output": output.display().to_string(),
-            "seconds": seconds,
-        });
-        outln!("{obj}")?;
+        let summary = BatchJson {
+            runs: records.len(),
+            failed,
+            unreadable,
+            methods: per_method
+                .iter()
+                .map(|(m, &(runs, failed))| (m.to_string(), MethodJson { runs, failed }))
+                .collect(),
+            sequences,
+            stray: stray
+                .iter()
+                .map(|(p, why)| StrayJson {
+                    path: p.display().to_string(),
+                    reason: why.clone(),
+                })
+                .collect(),
+            output: output.display().to_string(),
+            seconds,
+        };
+        outln!("{}", serde_json::to_string(&summary)?)?;
     } else {
         outln!(
             "evaluated {} runs of {} method(s) on {} sequence(s) in {seconds:.2} s: {} failed{}",

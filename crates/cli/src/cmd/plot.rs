@@ -165,6 +165,12 @@ pub fn cumulative_chart(records: &[RunRecord], metric: Metric, filter: Direction
     } else {
         (0.1, 10.0)
     };
+    // e'_s is a multiplier of at least 1: its axis starts at 1
+    let (lo, hi) = if metric.is_multiplier() {
+        (1.0, hi.max(1.1))
+    } else {
+        (lo, hi)
+    };
     let runs = curves.iter().map(|c| c.runs).max().unwrap_or(0);
     let mut chart = Chart::new(
         format!(
@@ -179,6 +185,7 @@ pub fn cumulative_chart(records: &[RunRecord], metric: Metric, filter: Direction
     chart.x_range = Some([lo, hi]);
     chart.y_range = Some([0.0, runs.max(1) as f64 * 1.04]);
     chart.legend = Some(Corner::TopLeft);
+    chart.y_integer = true;
     // one colour per method; with a direction split, backwards runs are dashed
     let mut methods: Vec<&str> = records.iter().map(|r| r.key.method.as_str()).collect();
     methods.sort_unstable();
@@ -203,6 +210,7 @@ pub fn cumulative_chart(records: &[RunRecord], metric: Metric, filter: Direction
 pub fn run(args: &Args) -> Result<()> {
     match &args.what {
         What::Cumulative(a) => {
+            plot::format_of(&a.output)?;
             dataset_io::check_output_file(&a.output, a.force)?;
             let records = load(&a.results)?;
             let filter = match (a.split, a.direction) {
@@ -262,4 +270,53 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Seven runs of one method in both directions, e_s around 1, one failure.
+    fn records() -> Vec<RunRecord> {
+        let mut csv = format!("{}\n", eval_metrics::CSV_HEADER);
+        for i in 0..7 {
+            let dir = if i % 2 == 0 { "fwd" } else { "bwd" };
+            let e_s = if i % 3 == 0 {
+                1.0 / (1.0 + 0.1 * i as f64)
+            } else {
+                1.0 + 0.05 * i as f64
+            };
+            csv += &format!("m,sequence_01,{dir},{i},ok,0.{i}5,{e_s},0.5,1,1,0.1,0.1,100,\n");
+        }
+        csv += "m,sequence_01,fwd,9,failed,inf,inf,inf,inf,inf,inf,inf,0,lost\n";
+        parse_csv(&csv).unwrap()
+    }
+
+    #[test]
+    fn cumulative_counts_are_integers_and_e_s_starts_at_1() {
+        let r = records();
+        let c = cumulative_chart(&r, Metric::ES, DirectionFilter::Both);
+        assert_eq!(c.x_range.map(|x| x[0]), Some(1.0));
+        assert!(c.x_log && c.y_integer);
+        assert!(c.x_label.contains("e'_s") && c.y_label == "number of runs");
+        // the step curve of e'_s starts at or right of 1 and reaches the 7 successful runs
+        let pts = &c.series[0].points;
+        assert!(pts.iter().all(|p| p[0] >= 1.0), "{pts:?}");
+        assert_eq!(pts.last().map(|p| p[1]), Some(7.0));
+        assert!(
+            c.series[0].label.contains("7/8 runs"),
+            "{}",
+            c.series[0].label
+        );
+        let c = cumulative_chart(&r, Metric::EAlign, DirectionFilter::Split);
+        assert!(c.x_range.unwrap()[0] < 0.05);
+        assert_eq!(c.series.len(), 2);
+        assert!(
+            c.series.iter().any(|s| s.dashed),
+            "backwards runs are dashed"
+        );
+        assert!(c.x_label.contains("ground-truth length unit"));
+        let c = cumulative_chart(&r, Metric::ER, DirectionFilter::Both);
+        assert!(c.x_label.contains("degrees"));
+    }
 }
