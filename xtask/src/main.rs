@@ -109,15 +109,16 @@ fn run() -> Result<()> {
             .get(mode)
             .and_then(|m| m.get(&f.key))
             .and_then(|v| v.as_f64());
+        // a figure without a threshold fails: every figure the stages report is checked
         let ok = match limit {
             Some(l) if f.lower_is_better => f.value <= l,
             Some(l) => f.value >= l,
-            None => true,
+            None => false,
         };
         if !ok {
             failed.push(f.key.clone());
         }
-        let lim = limit.map_or("-".to_string(), |l| format!("{l}"));
+        let lim = limit.map_or("(none)".to_string(), |l| format!("{l}"));
         let shown = if f.value != 0.0 && f.value.abs() < 1e-3 {
             format!("{:.3e}", f.value)
         } else {
