@@ -3,4 +3,5 @@
 
 mod dso_corpus;
 mod dso_reference;
+mod readme;
 mod rectify_roundtrip;

@@ -8,9 +8,9 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CameraError {
     /// A line of camera.txt does not have the expected form.
-    #[error("line {line}: expected {expected}, found `{found}`")]
+    #[error("{}expected {expected}, found `{found}`", at_line(*line))]
     Parse {
-        /// 1-based line number.
+        /// 1-based line number (0 when the value did not come from a file).
         line: usize,
         /// What the line should contain.
         expected: String,
@@ -18,9 +18,9 @@ pub enum CameraError {
         found: String,
     },
     /// A number written with a decimal comma (`0,5`); camera.txt needs a '.'.
-    #[error("line {line}: `{token}` in `{text}`: the decimal separator must be '.', not ',' (DSO reads `0,5` as 0)")]
+    #[error("{}`{token}` in `{text}`: the decimal separator must be '.', not ',' (DSO reads `0,5` as 0)", at_line(*line))]
     DecimalComma {
-        /// 1-based line number.
+        /// 1-based line number (0 when the value did not come from a file).
         line: usize,
         /// The offending token.
         token: String,
@@ -28,7 +28,7 @@ pub enum CameraError {
         text: String,
     },
     /// A value parsed but is not acceptable (non-finite, non-positive focal length, ...).
-    #[error("line {line}: {message}")]
+    #[error("{}{message}", at_line(*line))]
     InvalidValue {
         /// 1-based line number (0 when the value did not come from a file).
         line: usize,
@@ -85,4 +85,14 @@ pub enum CameraError {
         /// Buffer length given.
         len: usize,
     },
+}
+
+/// `"line N: "` for errors that came from a file line, nothing for line 0 (a value from the
+/// command line).
+fn at_line(line: usize) -> String {
+    if line > 0 {
+        format!("line {line}: ")
+    } else {
+        String::new()
+    }
 }

@@ -6,7 +6,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+#[macro_use]
+mod out;
 mod cmd;
+mod interrupt;
 mod plot;
 mod progress;
 
@@ -45,7 +48,31 @@ enum Command {
     Synth(cmd::synth::Args),
 }
 
+/// Prints a warning to stderr (`monovo: warning: ...`).
+pub(crate) fn warn(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "monovo: warning: {args}");
+}
+
+/// The error and its causes, each printed once: a cause whose text the message already ends
+/// with (an I/O error that its wrapper prints as well) is left out.
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || msg.ends_with(&text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&text);
+    }
+    msg
+}
+
 fn main() -> ExitCode {
+    interrupt::install();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => cmd::demo::run(&args),
@@ -61,8 +88,15 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // the reader went away (`monovo ... | head`): nothing more to say to anyone
+        Err(e) if out::is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("monovo: error: {e:#}");
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr().lock(),
+                "monovo: error: {}",
+                error_chain(&e)
+            );
             ExitCode::FAILURE
         }
     }

@@ -1,5 +1,5 @@
 //! `monovo calib response`.
-use crate::common::{monovo, stderr, stdout, temp_dir};
+use crate::common::{files_of, monovo, monovo_threads, stderr, stdout, temp_dir};
 
 #[test]
 fn response_calibration_end_to_end_and_bad_sweeps() {
@@ -304,4 +304,104 @@ fn vignette_bad_inputs_fail_clearly_without_output() {
     std::fs::write(set.join("times.txt"), two).unwrap();
     let e = run(&[]);
     assert!(e.contains("times.txt") && e.contains("exposure"), "{e}");
+}
+
+/// Synthetic sweeps and walls, and both calibrations (marker detection included), with 1 and
+/// with 2 threads: bit-identical files.
+#[test]
+fn synth_and_calibrations_are_bit_identical_with_one_and_two_threads() {
+    let d = temp_dir("calib_threads");
+    let mut outputs = Vec::new();
+    for threads in [1, 2] {
+        let base = d.join(format!("threads{threads}"));
+        std::fs::create_dir_all(&base).unwrap();
+        let p = |n: &str| base.join(n).to_str().unwrap().to_string();
+        let (sweep, wall) = (p("sweep"), p("wall"));
+        let (pcalib, vignette) = (p("pcalib.txt"), p("vignette.png"));
+        let steps: [&[&str]; 4] = [
+            &[
+                "synth", "sweep", "-o", &sweep, "--size", "160x128", "--frames", "16",
+            ],
+            &["calib", "response", &sweep, "-o", &pcalib],
+            &[
+                "synth", "vignette", "-o", &wall, "--size", "320x256", "--frames", "40", "--seed",
+                "9",
+            ],
+            &["calib", "vignette", &wall, "-o", &vignette],
+        ];
+        for args in steps {
+            let o = monovo_threads(threads, args);
+            assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        }
+        outputs.push(files_of(&base));
+    }
+    let names = |o: &[(String, Vec<u8>)]| o.iter().map(|f| f.0.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&outputs[0]), names(&outputs[1]));
+    assert!(outputs[0].len() >= 12, "{:?}", names(&outputs[0]));
+    let differ: Vec<&String> = outputs[0]
+        .iter()
+        .zip(&outputs[1])
+        .filter(|(a, b)| a.1 != b.1)
+        .map(|(a, _)| &a.0)
+        .collect();
+    assert!(
+        differ.is_empty(),
+        "differ between 1 and 2 threads: {differ:?}"
+    );
+}
+
+/// Options outside the values they can take, from --config or from a flag, are refused before
+/// any work (the sequence is not even opened), naming the option and the file.
+#[test]
+fn absurd_calibration_options_are_refused_before_any_work() {
+    let d = temp_dir("calib_options");
+    let missing = d.join("no-such-sequence");
+    let missing = missing.to_str().unwrap();
+    for (what, config, flag, name) in [
+        ("vignette", "[vignette]\ngrid = 100000\n", None, "grid"),
+        (
+            "vignette",
+            "[vignette]\nsmoothing_px = 1e300\n",
+            None,
+            "smoothing_px",
+        ),
+        ("vignette", "[vignette]\nextent = 0.0\n", None, "extent"),
+        (
+            "response",
+            "[response]\nsaturation_border = 100000\n",
+            None,
+            "saturation_border",
+        ),
+        ("response", "", Some(["--tolerance", "nan"]), "tolerance"),
+        (
+            "response",
+            "[response]\ncensor_sigmas = inf\n",
+            None,
+            "censor_sigmas",
+        ),
+    ] {
+        let cfg = d.join("options.toml");
+        std::fs::write(&cfg, config).unwrap();
+        let out = d.join("out.png");
+        let mut args = vec![
+            "calib",
+            what,
+            missing,
+            "-o",
+            out.to_str().unwrap(),
+            "--config",
+            cfg.to_str().unwrap(),
+        ];
+        args.extend(flag.iter().flatten());
+        let o = monovo(&args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{what} {name}: {e}");
+        assert!(
+            e.contains(&format!("`{name}`"))
+                && e.contains("options.toml")
+                && !e.contains("no-such"),
+            "{what} {name}: {e}"
+        );
+        assert!(!out.exists());
+    }
 }

@@ -14,7 +14,7 @@ fn json_gives_exactly_the_output_camera() {
     assert_eq!(v["width"], 640);
     assert_eq!(v["height"], 480);
 
-    let o = monovo(&["camera", &cam, "--json", "--output", "full"]);
+    let o = monovo(&["camera", &cam, "--json", "--pinhole", "full"]);
     let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert!((v["fx"].as_f64().unwrap() - 214.536).abs() < 1e-3);
 

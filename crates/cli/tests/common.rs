@@ -32,3 +32,31 @@ pub fn repo_file(rel: &str) -> String {
         .to_string_lossy()
         .into_owned()
 }
+
+/// Every file under `dir` (path relative to `dir`, bytes), sorted by path.
+pub fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Runs monovo with `RAYON_NUM_THREADS` set.
+pub fn monovo_threads(threads: usize, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monovo"))
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .args(args)
+        .output()
+        .expect("run monovo")
+}

@@ -6,5 +6,7 @@ mod camera;
 mod common;
 mod eval;
 mod exposure;
+mod faults;
 mod figures;
 mod rectify;
+mod terminal;

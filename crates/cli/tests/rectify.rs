@@ -1,5 +1,5 @@
 //! `monovo info` and `monovo rectify` on a generated 1280x1024 zipped JPEG sequence.
-use crate::common::{monovo, stderr, stdout, temp_dir};
+use crate::common::{files_of, monovo, stderr, stdout, temp_dir};
 use camera_model::{CameraFile, RectifyMap};
 use dataset_io::Sequence;
 use std::path::{Path, PathBuf};
@@ -266,7 +266,7 @@ fn photometric_without_vignette_corrects_the_response_alone() {
         "-o",
         out.to_str().unwrap(),
         "--photometric",
-        "--output",
+        "--pinhole",
         "none",
         "--size",
         "1280x1024",
@@ -385,4 +385,39 @@ fn sixteen_bit_frames_with_an_embedded_bit_depth() {
         "{e}"
     );
     assert!(!out.exists());
+}
+
+/// Every file of a folder, by relative path.
+/// The same rectification with 1 and with 2 threads writes bit-identical sequences.
+#[test]
+fn outputs_are_bit_identical_with_one_and_two_threads() {
+    let d = temp_dir("rectify_threads");
+    for (name, extra) in [
+        ("geometric", vec!["--zip"]),
+        ("photometric", vec!["--irradiance", "--reverse"]),
+    ] {
+        let mut outputs = Vec::new();
+        for threads in ["1", "2"] {
+            let out = d.join(format!("{name}{threads}"));
+            let mut args = vec![
+                "rectify",
+                fixture().to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            args.extend(&extra);
+            let o = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"))
+                .env("RAYON_NUM_THREADS", threads)
+                .args(&args)
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            outputs.push(files_of(&out));
+        }
+        assert!(outputs[0].len() >= 3, "{name}");
+        assert!(
+            outputs[0] == outputs[1],
+            "{name}: outputs differ between 1 and 2 threads"
+        );
+    }
 }

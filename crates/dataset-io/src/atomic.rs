@@ -3,25 +3,13 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::temporaries::{self, creating, temp_sibling};
 use crate::DatasetError;
 
 /// Reads a whole text file; the error names the file.
 pub fn read_text(path: &Path) -> Result<String, DatasetError> {
     std::fs::read_to_string(path).map_err(|e| DatasetError::io(path, e))
-}
-
-static COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// A temporary sibling of `path`: same folder, hidden, unique to this process and call.
-pub fn temp_sibling(path: &Path) -> PathBuf {
-    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let name = path
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
 }
 
 /// Writes `bytes` to `path` atomically (temporary sibling, then rename). On any error the
@@ -43,20 +31,28 @@ pub fn write_atomic_with(
             ));
         }
     }
+    temporaries::remove_stale(path);
     let tmp = temp_sibling(path);
     let result = (|| {
-        let f = std::fs::File::create(&tmp)?;
+        let f = {
+            let _gate = creating();
+            temporaries::register(&tmp);
+            std::fs::File::create(&tmp)?
+        };
         let mut w = std::io::BufWriter::new(f);
         fill(&mut w)?;
         let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
         drop(f);
+        let _gate = creating();
         std::fs::rename(&tmp, path)
     })();
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
+        temporaries::unregister(&tmp);
         return Err(DatasetError::io(path, e));
     }
+    temporaries::unregister(&tmp);
     Ok(())
 }
 
@@ -85,15 +81,25 @@ pub fn check_output_file(path: &Path, force: bool) -> Result<(), DatasetError> {
             format!("the folder {} does not exist", parent.display()),
         ));
     }
+    probe_folder(path, &parent)
+}
+
+/// Tries to create (and removes again) a temporary file in `parent` for the output `path`.
+pub(crate) fn probe_folder(path: &Path, parent: &Path) -> Result<(), DatasetError> {
+    temporaries::remove_stale(path);
     let probe = temp_sibling(path);
-    match std::fs::File::create(&probe) {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
-        }
+    let created = {
+        let _gate = creating();
+        temporaries::register(&probe);
+        std::fs::File::create(&probe)
+    };
+    let _ = std::fs::remove_file(&probe);
+    temporaries::unregister(&probe);
+    match created {
+        Ok(_) => Ok(()),
         Err(e) => Err(DatasetError::invalid(
             path,
-            format!("cannot write in {}: {e}", parent.display()),
+            format!("cannot write in the folder {}: {e}", parent.display()),
         )),
     }
 }

@@ -32,10 +32,12 @@ mod outdir;
 mod png;
 mod results;
 mod sequence;
+mod temporaries;
 mod times;
 mod writer;
+mod zipimages;
 
-pub use atomic::{check_output_file, read_text, temp_sibling, write_atomic, write_atomic_with};
+pub use atomic::{check_output_file, read_text, write_atomic, write_atomic_with};
 pub use error::DatasetError;
 pub use outdir::OutputDir;
 pub use png::{
@@ -47,5 +49,10 @@ pub use sequence::{
     decode_gray, decode_gray16, decode_gray8, decode_gray_map, read_gray16, read_gray8,
     read_gray_map, Frame, GrayImage, NativeFrame, Sequence,
 };
+pub use temporaries::{
+    in_flight as temporaries_in_flight, remove_all_and_block as remove_temporaries_and_block,
+    remove_stale as remove_stale_temporaries, temp_sibling,
+};
 pub use times::{parse_times, times_text, TimeRow, Times};
 pub use writer::{write_images_zip, SequenceWriter};
+pub use zipimages::ImagesZip;

@@ -28,7 +28,7 @@ fn encoder<W: std::io::Write>(w: W, speed: PngSpeed) -> PngEncoder<W> {
 }
 
 fn check_len(path: &Path, len: usize, want: usize) -> Result<(), DatasetError> {
-    if len != want {
+    if len != want || want == 0 {
         return Err(DatasetError::invalid(
             path,
             format!("image buffer has {len} bytes, expected {want}"),
@@ -37,7 +37,32 @@ fn check_len(path: &Path, len: usize, want: usize) -> Result<(), DatasetError> {
     Ok(())
 }
 
-/// Encodes an image into PNG bytes. `channels` is 1 (grey) or 3 (RGB) for 8-bit data.
+/// The error of an encoder asked to write a buffer that does not hold `width * height *
+/// channels` samples (or an unusable size): the encoder is never called with it.
+fn dimension_error(
+    width: usize,
+    height: usize,
+    channels: usize,
+    samples: usize,
+) -> Option<image::ImageError> {
+    use image::error::{ParameterError, ParameterErrorKind};
+    let want = width
+        .checked_mul(height)
+        .and_then(|p| p.checked_mul(channels));
+    let fits = u32::try_from(width).is_ok() && u32::try_from(height).is_ok();
+    if want == Some(samples) && fits && width > 0 && height > 0 {
+        return None;
+    }
+    Some(image::ImageError::Parameter(ParameterError::from_kind(
+        ParameterErrorKind::Generic(format!(
+            "a {width}x{height} image with {channels} channel(s) needs {} samples, the buffer has {samples}",
+            want.map_or("more than usize::MAX".to_string(), |w| w.to_string())
+        )),
+    )))
+}
+
+/// Encodes an image into PNG bytes. `channels` is 1 (grey) or 3 (RGB) for 8-bit data; a
+/// buffer of another length than `width * height * channels` is an error.
 pub fn encode_png_u8(
     width: usize,
     height: usize,
@@ -45,23 +70,37 @@ pub fn encode_png_u8(
     data: &[u8],
     speed: PngSpeed,
 ) -> Result<Vec<u8>, image::ImageError> {
-    let color = if channels == 3 {
-        ExtendedColorType::Rgb8
-    } else {
-        ExtendedColorType::L8
+    let color = match channels {
+        1 => ExtendedColorType::L8,
+        3 => ExtendedColorType::Rgb8,
+        n => {
+            use image::error::{ParameterError, ParameterErrorKind};
+            return Err(image::ImageError::Parameter(ParameterError::from_kind(
+                ParameterErrorKind::Generic(format!(
+                    "{n} channels; 8-bit PNG output is grey (1) or RGB (3)"
+                )),
+            )));
+        }
     };
+    if let Some(e) = dimension_error(width, height, channels, data.len()) {
+        return Err(e);
+    }
     let mut out = Vec::with_capacity(data.len() / 2 + 1024);
     encoder(&mut out, speed).write_image(data, width as u32, height as u32, color)?;
     Ok(out)
 }
 
-/// Encodes a 16-bit grey image into PNG bytes.
+/// Encodes a 16-bit grey image into PNG bytes; a buffer of another length than `width *
+/// height` is an error.
 pub fn encode_png_u16(
     width: usize,
     height: usize,
     data: &[u16],
     speed: PngSpeed,
 ) -> Result<Vec<u8>, image::ImageError> {
+    if let Some(e) = dimension_error(width, height, 1, data.len()) {
+        return Err(e);
+    }
     // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
     let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
     let mut out = Vec::with_capacity(bytes.len() / 2 + 1024);
@@ -83,7 +122,11 @@ pub fn write_png_u8(
     data: &[u8],
     speed: PngSpeed,
 ) -> Result<(), DatasetError> {
-    check_len(path, data.len(), width * height * channels)?;
+    check_len(
+        path,
+        data.len(),
+        width.saturating_mul(height).saturating_mul(channels),
+    )?;
     let bytes = encode_png_u8(width, height, channels, data, speed)
         .map_err(|e| DatasetError::invalid(path, format!("PNG encoding failed: {e}")))?;
     write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
@@ -97,19 +140,23 @@ pub fn write_png_u16(
     data: &[u16],
     speed: PngSpeed,
 ) -> Result<(), DatasetError> {
-    check_len(path, data.len(), width * height)?;
+    check_len(path, data.len(), width.saturating_mul(height))?;
     let bytes = encode_png_u16(width, height, data, speed)
         .map_err(|e| DatasetError::invalid(path, format!("PNG encoding failed: {e}")))?;
     write_atomic_with(path, |w| std::io::Write::write_all(w, &bytes))
 }
 
-/// Encodes an 8-bit grey image as JPEG of the given quality (1-100).
+/// Encodes an 8-bit grey image as JPEG of the given quality (1-100); a buffer of another
+/// length than `width * height` is an error.
 pub fn encode_jpeg_gray(
     width: usize,
     height: usize,
     data: &[u8],
     quality: u8,
 ) -> Result<Vec<u8>, image::ImageError> {
+    if let Some(e) = dimension_error(width, height, 1, data.len()) {
+        return Err(e);
+    }
     let mut out = Vec::with_capacity(data.len() / 4);
     let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100));
     enc.write_image(data, width as u32, height as u32, ExtendedColorType::L8)?;
@@ -125,7 +172,7 @@ pub fn write_png_u16_with_text(
     data: &[u16],
     text: &[(&str, String)],
 ) -> Result<(), DatasetError> {
-    check_len(path, data.len(), width * height)?;
+    check_len(path, data.len(), width.saturating_mul(height))?;
     let bad = |e: &dyn std::fmt::Display| {
         DatasetError::invalid(path, format!("PNG encoding failed: {e}"))
     };

@@ -4,7 +4,6 @@
 //! the order.
 
 use std::fs::File;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -12,16 +11,15 @@ use camera_model::{CameraFile, Image, ImageSize};
 use rayon::prelude::*;
 
 use crate::times::{parse_times, Times};
-use crate::{read_text, DatasetError};
+use crate::zipimages::is_image_name;
+use crate::{read_text, DatasetError, ImagesZip};
 
 /// Where the images come from.
 #[derive(Debug)]
 enum Source {
     Zip {
         path: PathBuf,
-        archive: Mutex<zip::ZipArchive<File>>,
-        /// Archive index of each image, sorted by name.
-        indices: Vec<usize>,
+        images: Mutex<ImagesZip<File>>,
     },
     Folder {
         files: Vec<PathBuf>,
@@ -105,16 +103,6 @@ pub struct Sequence {
     pub ground_truth_path: Option<PathBuf>,
 }
 
-const IMAGE_EXTS: [&str; 4] = ["jpg", "jpeg", "png", "pgm"];
-
-fn is_image_name(name: &str) -> bool {
-    let lower = name.to_ascii_lowercase();
-    let base = lower.rsplit('/').next().unwrap_or(&lower);
-    !base.starts_with('.')
-        && !lower.starts_with("__macosx")
-        && IMAGE_EXTS.iter().any(|e| base.ends_with(&format!(".{e}")))
-}
-
 /// Decodes a JPEG to 8-bit grey, strictly: truncated or corrupt entropy-coded data is an
 /// error instead of a silently grey or smeared frame.
 fn decode_jpeg_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
@@ -130,6 +118,19 @@ fn decode_jpeg_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
     let (w, h) = d
         .dimensions()
         .ok_or_else(|| "corrupt JPEG: no frame header".to_string())?;
+    // Every 8x8 block of a Huffman-coded scan takes at least one bit (the code of its DC
+    // difference), and zune-jpeg has no arithmetic decoding. A frame that declares more blocks
+    // than the file has bits ended its scan early (an end-of-image marker where data should
+    // be), which the decoder accepts even in strict mode and would fill, for a few hundred
+    // bytes, as a mostly empty image of up to 16384x16384 pixels.
+    let blocks = w.div_ceil(8).saturating_mul(h.div_ceil(8));
+    if bytes.len().saturating_mul(8) < blocks {
+        return Err(format!(
+            "corrupt JPEG: a {w}x{h} frame needs at least {} bytes of data, the file has {}",
+            blocks.div_ceil(8),
+            bytes.len()
+        ));
+    }
     let data = d.decode().map_err(|e| format!("corrupt JPEG: {e:?}"))?;
     if data.len() != w * h {
         return Err(format!(
@@ -259,6 +260,37 @@ pub fn read_gray8(path: &Path) -> Result<Image<u8>, DatasetError> {
     decode_gray8(&bytes).map_err(|m| DatasetError::invalid(path, m))
 }
 
+/// A warning when the ids of times.txt do not name the images (rows are paired with the
+/// images by order, as DSO pairs them): the first mismatch and their number. Ids and image
+/// stems that are both numbers compare as numbers (`0` names `000000.png`).
+fn id_mismatch(times: &Times, names: &[String], times_path: &Path) -> Option<String> {
+    let stem = |name: &str| -> String {
+        let base = name.rsplit('/').next().unwrap_or(name);
+        match base.rsplit_once('.') {
+            Some((s, _)) => s.to_string(),
+            None => base.to_string(),
+        }
+    };
+    let same = |id: &str, st: &str| {
+        id == st || matches!((id.parse::<u64>(), st.parse::<u64>()), (Ok(a), Ok(b)) if a == b)
+    };
+    let mut first = None;
+    let mut count = 0usize;
+    for (k, (row, name)) in times.rows.iter().zip(names).enumerate() {
+        if !same(&row.id, &stem(name)) {
+            count += 1;
+            first.get_or_insert((k, row.id.clone(), name.clone()));
+        }
+    }
+    let (k, id, name) = first?;
+    let line = times.lines.get(k).copied().unwrap_or(k + 1);
+    Some(format!(
+        "{}: line {line}: id `{id}` but image {k} is `{name}` ({count} of {} rows do not name their image); rows are paired with the images in name order, as DSO pairs them",
+        times_path.display(),
+        names.len()
+    ))
+}
+
 fn optional(dir: &Path, name: &str) -> Option<PathBuf> {
     let p = dir.join(name);
     p.is_file().then_some(p)
@@ -269,30 +301,25 @@ impl Sequence {
     /// `images/`), times.txt (one row per image, increasing timestamps), camera.txt when
     /// present (its input size must match the images).
     pub fn open(dir: &Path) -> Result<Sequence, DatasetError> {
+        if !dir.exists() {
+            return Err(DatasetError::invalid(dir, "does not exist"));
+        }
         if !dir.is_dir() {
-            return Err(DatasetError::invalid(dir, "not a sequence folder"));
+            return Err(DatasetError::invalid(
+                dir,
+                "is a file, not a sequence folder (images.zip or images/, times.txt, ...)",
+            ));
         }
         let zip_path = dir.join("images.zip");
         let folder = dir.join("images");
         let (source, names) = if zip_path.is_file() {
             let f = File::open(&zip_path).map_err(|e| DatasetError::io(&zip_path, e))?;
-            let archive = zip::ZipArchive::new(f).map_err(|e| {
-                DatasetError::invalid(&zip_path, format!("not a readable zip: {e}"))
-            })?;
-            let mut entries: Vec<(String, usize)> = (0..archive.len())
-                .filter_map(|i| {
-                    let name = archive.name_for_index(i)?.ok()?.to_string();
-                    is_image_name(&name).then_some((name, i))
-                })
-                .collect();
-            entries.sort();
-            let names: Vec<String> = entries.iter().map(|e| e.0.clone()).collect();
-            let indices = entries.iter().map(|e| e.1).collect();
+            let images = ImagesZip::new(f).map_err(|m| DatasetError::invalid(&zip_path, m))?;
+            let names = images.names().to_vec();
             (
                 Source::Zip {
                     path: zip_path.clone(),
-                    archive: Mutex::new(archive),
-                    indices,
+                    images: Mutex::new(images),
                 },
                 names,
             )
@@ -343,6 +370,10 @@ impl Sequence {
                     names.len()
                 ),
             ));
+        }
+        let mut times = times;
+        if let Some(w) = id_mismatch(&times, &names, &times_path) {
+            times.warnings.push(w);
         }
         let mut seq = Sequence {
             dir: dir.to_path_buf(),
@@ -448,25 +479,11 @@ impl Sequence {
             ));
         }
         match &self.source {
-            Source::Zip {
-                path,
-                archive,
-                indices,
-            } => {
-                let mut a = archive.lock().map_err(|_| {
+            Source::Zip { path, images } => {
+                let mut z = images.lock().map_err(|_| {
                     DatasetError::invalid(path, "zip reader poisoned by an earlier failure")
                 })?;
-                let mut f = a.by_index(indices[k]).map_err(|e| {
-                    DatasetError::invalid(path, format!("{}: unreadable entry: {e}", self.names[k]))
-                })?;
-                let mut buf = Vec::with_capacity(f.size() as usize);
-                f.read_to_end(&mut buf).map_err(|e| {
-                    DatasetError::invalid(
-                        path,
-                        format!("{}: truncated or corrupt entry: {e}", self.names[k]),
-                    )
-                })?;
-                Ok(buf)
+                z.read(k).map_err(|m| DatasetError::invalid(path, m))
             }
             Source::Folder { files } => {
                 std::fs::read(&files[k]).map_err(|e| DatasetError::io(&files[k], e))

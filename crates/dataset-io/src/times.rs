@@ -24,7 +24,9 @@ pub struct TimeRow {
 pub struct Times {
     /// The rows, in file order.
     pub rows: Vec<TimeRow>,
-    /// Warnings (for example interpolated zero exposures).
+    /// The 1-based line of the file of each row.
+    pub lines: Vec<usize>,
+    /// Warnings (for example interpolated zero exposures), each naming the file and line.
     pub warnings: Vec<String>,
 }
 
@@ -36,6 +38,16 @@ impl Times {
                 .rows
                 .iter()
                 .all(|r| r.exposure_ms.is_some_and(|e| e > 0.0))
+    }
+
+    /// The first row whose exposure is unknown (no third column, or 0 that could not be
+    /// interpolated): its index and its 1-based line in the file.
+    pub fn first_unknown_exposure(&self) -> Option<(usize, usize)> {
+        let k = self
+            .rows
+            .iter()
+            .position(|r| !r.exposure_ms.is_some_and(|e| e > 0.0))?;
+        Some((k, self.lines.get(k).copied().unwrap_or(k + 1)))
     }
 
     /// Smallest and largest exposure in ms, if known.
@@ -60,6 +72,7 @@ fn excerpt(s: &str) -> String {
 /// warning; other zero exposures are kept (the caller decides whether it needs them).
 pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
     let mut rows: Vec<TimeRow> = Vec::new();
+    let mut lines: Vec<usize> = Vec::new();
     let mut columns: Option<usize> = None;
     let mut prev: Option<f64> = None;
     let mut warnings = Vec::new();
@@ -136,6 +149,7 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
             timestamp,
             exposure_ms,
         });
+        lines.push(no);
     }
     if extra_columns > 0 {
         warnings.push(format!(
@@ -149,23 +163,44 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
             path.display()
         ));
     }
-    // interpolate isolated zero exposures between two known ones
-    for i in 1..rows.len().saturating_sub(1) {
-        if rows[i].exposure_ms == Some(0.0) {
-            if let (Some(a), Some(b)) = (rows[i - 1].exposure_ms, rows[i + 1].exposure_ms) {
-                if a > 0.0 && b > 0.0 {
-                    rows[i].exposure_ms = Some(0.5 * (a + b));
-                    warnings.push(format!(
-                        "{}: line {}: exposure 0 interpolated to {} ms from its neighbours",
-                        path.display(),
-                        i + 1,
-                        0.5 * (a + b)
-                    ));
-                }
+    // interpolate isolated zero exposures between two known ones (as DSO does)
+    let known = |e: Option<f64>| e.is_some_and(|e| e > 0.0);
+    let mut unknown = Vec::new();
+    for i in 0..rows.len() {
+        if rows[i].exposure_ms != Some(0.0) {
+            continue;
+        }
+        let before = i.checked_sub(1).and_then(|j| rows[j].exposure_ms);
+        let after = rows.get(i + 1).and_then(|r| r.exposure_ms);
+        match (before, after) {
+            (Some(a), Some(b)) if known(Some(a)) && known(Some(b)) => {
+                let e = 0.5 * (a + b);
+                rows[i].exposure_ms = Some(e);
+                warnings.push(format!(
+                    "{}: line {}: exposure 0 interpolated to {e} ms from its neighbours (as DSO does)",
+                    path.display(),
+                    lines[i]
+                ));
             }
+            _ => unknown.push(lines[i]),
         }
     }
-    Ok(Times { rows, warnings })
+    if let Some(first) = unknown.first() {
+        warnings.push(format!(
+            "{}: line {first}: exposure 0 with no known exposure on both sides: unknown, not interpolated{}",
+            path.display(),
+            if unknown.len() > 1 {
+                format!(" ({} such lines)", unknown.len())
+            } else {
+                String::new()
+            }
+        ));
+    }
+    Ok(Times {
+        rows,
+        lines,
+        warnings,
+    })
 }
 
 /// Writes times.txt (`id timestamp exposure`, or two columns when no exposure is known).

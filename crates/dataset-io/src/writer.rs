@@ -6,6 +6,7 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::temporaries::creating;
 use crate::times::{times_text, TimeRow};
 use crate::{DatasetError, OutputDir};
 
@@ -19,6 +20,7 @@ pub struct SequenceWriter {
     out: OutputDir,
     images: Images,
     rows: Vec<TimeRow>,
+    comments: Vec<String>,
 }
 
 impl SequenceWriter {
@@ -31,18 +33,20 @@ impl SequenceWriter {
     ) -> Result<SequenceWriter, DatasetError> {
         let out = OutputDir::create(target, force)?;
         let images = if zipped {
-            let p = out.path().join("images.zip");
-            let f = File::create(&p).map_err(|e| DatasetError::io(&p, e))?;
+            let p = out.file("images.zip")?;
+            let f = {
+                let _gate = creating();
+                File::create(&p).map_err(|e| DatasetError::io(&p, e))?
+            };
             Images::Zip(Box::new(zip::ZipWriter::new(std::io::BufWriter::new(f))), p)
         } else {
-            let d = out.path().join("images");
-            std::fs::create_dir(&d).map_err(|e| DatasetError::io(&d, e))?;
-            Images::Folder(d)
+            Images::Folder(out.folder("images")?)
         };
         Ok(SequenceWriter {
             out,
             images,
             rows: Vec::new(),
+            comments: Vec::new(),
         })
     }
 
@@ -57,6 +61,7 @@ impl SequenceWriter {
         match &mut self.images {
             Images::Folder(d) => {
                 let p = d.join(&name);
+                let _gate = creating();
                 std::fs::write(&p, png).map_err(|e| DatasetError::io(&p, e))?;
             }
             Images::Zip(z, p) => {
@@ -73,6 +78,13 @@ impl SequenceWriter {
         Ok(())
     }
 
+    /// Adds a `# comment` line at the top of times.txt (DSO and monovo skip such lines):
+    /// where a reader finds what the values mean, for example the scale of the pixels.
+    pub fn add_times_comment(&mut self, comment: &str) {
+        self.comments
+            .extend(comment.lines().map(|l| l.trim_end().to_string()));
+    }
+
     /// Number of frames added.
     pub fn frames(&self) -> usize {
         self.rows.len()
@@ -80,8 +92,7 @@ impl SequenceWriter {
 
     /// Writes a further file (camera.txt, pcalib.txt, ...) into the sequence folder.
     pub fn add_file(&self, name: &str, bytes: &[u8]) -> Result<(), DatasetError> {
-        let p = self.out.file(name)?;
-        std::fs::write(&p, bytes).map_err(|e| DatasetError::io(&p, e))
+        self.out.write(name, bytes).map(|_| ())
     }
 
     /// Writes times.txt, closes the zip and moves the folder into place.
@@ -92,8 +103,14 @@ impl SequenceWriter {
                 .map_err(|e| DatasetError::invalid(p.as_path(), format!("zip: {e}")))?;
             w.flush().map_err(|e| DatasetError::io(p.as_path(), e))?;
         }
-        let t = self.out.file("times.txt")?;
-        std::fs::write(&t, times_text(&self.rows)).map_err(|e| DatasetError::io(&t, e))?;
+        let mut text = String::new();
+        for c in &self.comments {
+            text.push_str("# ");
+            text.push_str(c);
+            text.push('\n');
+        }
+        text.push_str(&times_text(&self.rows));
+        self.out.write("times.txt", text.as_bytes())?;
         self.out.commit()
     }
 }

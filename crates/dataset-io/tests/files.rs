@@ -109,3 +109,33 @@ fn output_dir_appears_whole_or_not_at_all() {
     assert!(!target.join("a.txt").exists() && target.join("b.txt").exists());
     assert!(OutputDir::create(&d.join("no/such/out"), false).is_err());
 }
+
+#[test]
+fn temporaries_are_listed_while_in_flight_and_stale_ones_removed() {
+    use dataset_io::OutputDir;
+    let d = tmp("temporaries");
+    let target = d.join("out");
+    let o = OutputDir::create(&target, false).unwrap();
+    assert!(dataset_io::temporaries_in_flight().contains(&o.path().to_path_buf()));
+    let staging = o.path().to_path_buf();
+    o.commit().unwrap();
+    assert!(!dataset_io::temporaries_in_flight().contains(&staging));
+    // a dead process's temporaries go, a running one's stay
+    let dead = d.join(".out.tmp-4294967294-1");
+    std::fs::create_dir_all(dead.join("x")).unwrap();
+    let alive = d.join(format!(".out.tmp-{}-99", std::process::id()));
+    std::fs::write(&alive, "x").unwrap();
+    let other = d.join(".other.tmp-4294967294-1");
+    std::fs::write(&other, "x").unwrap();
+    let removed = dataset_io::remove_stale_temporaries(&target);
+    assert_eq!(removed, vec![dead.clone()]);
+    assert!(!dead.exists() && alive.exists() && other.exists());
+    // checks before any work: existing, missing folder
+    assert!(matches!(
+        OutputDir::check(&target, false),
+        Err(DatasetError::Exists { .. })
+    ));
+    assert!(OutputDir::check(&target, true).is_ok());
+    let e = OutputDir::check(&d.join("no/such/out"), false).unwrap_err();
+    assert!(e.to_string().contains("does not exist"), "{e}");
+}

@@ -292,3 +292,96 @@ fn written_sequences_read_back() {
         assert!(SequenceWriter::create(&out, zipped, false).is_err());
     }
 }
+
+#[test]
+fn zero_exposures_name_their_file_lines() {
+    let p = Path::new("times.txt");
+    // an isolated zero is interpolated; two adjacent zeros stay unknown; lines count the
+    // comments and blank lines of the file
+    let t = parse_times(
+        "# comment\n0 1.0 5\n1 1.1 0\n2 1.2 7\n\n3 1.3 0\n4 1.4 0\n5 1.5 8\n",
+        p,
+    )
+    .unwrap();
+    assert_eq!(t.lines, vec![2, 3, 4, 6, 7, 8]);
+    assert_eq!(t.rows[1].exposure_ms, Some(6.0));
+    assert!(t.warnings[0].contains("line 3") && t.warnings[0].contains("interpolated"));
+    assert!(
+        t.warnings[1].contains("line 6") && t.warnings[1].contains("unknown"),
+        "{:?}",
+        t.warnings
+    );
+    assert_eq!(t.first_unknown_exposure(), Some((3, 6)));
+    assert!(!t.has_exposures());
+}
+
+/// A zip whose entry declares a size far beyond the archive: an error or the bytes there
+/// are, never an allocation of the declared size.
+#[test]
+fn a_corrupt_zip_entry_size_is_not_trusted() {
+    use std::io::{Cursor, Write};
+    let mut bytes = Vec::new();
+    {
+        let mut z = zip::ZipWriter::new(Cursor::new(&mut bytes));
+        let opts = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored);
+        z.start_file("00000.png", opts).unwrap();
+        z.write_all(&[7u8; 100]).unwrap();
+        z.finish().unwrap();
+    }
+    // the central directory's and the local header's uncompressed size: 4 GiB - 16
+    let patch = |b: &mut Vec<u8>, sig: [u8; 4], offset: usize| {
+        let at = b.windows(4).position(|w| w == sig).unwrap();
+        b[at + offset..at + offset + 4].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    };
+    patch(&mut bytes, [0x50, 0x4b, 0x01, 0x02], 24);
+    patch(&mut bytes, [0x50, 0x4b, 0x03, 0x04], 22);
+    match dataset_io::ImagesZip::new(Cursor::new(bytes)) {
+        Ok(mut z) => {
+            assert_eq!(z.names(), ["00000.png"]);
+            if let Ok(b) = z.read(0) {
+                assert!(b.len() <= 100);
+            }
+        }
+        Err(e) => assert!(e.contains("zip"), "{e}"),
+    }
+}
+
+/// A JPEG whose frame header declares far more 8x8 blocks than its scan can hold (the scan
+/// ends early at an end-of-image marker) is corrupt, not a large empty image.
+#[test]
+fn a_jpeg_too_short_for_its_size_is_corrupt() {
+    let good = encode_jpeg_gray(16, 16, &pattern(0, 16, 16), 90).unwrap();
+    assert_eq!(
+        dataset_io::decode_gray8(&good).unwrap().width(),
+        16,
+        "the unchanged frame decodes"
+    );
+    // the frame header (SOF0: FF C0, length, precision, height, width): 12336x2305
+    let sof = good.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+    let mut big = good.clone();
+    big[sof + 5..sof + 9].copy_from_slice(&[0x30, 0x30, 0x09, 0x01]);
+    for decode in [
+        |b: &[u8]| dataset_io::decode_gray8(b).map(|_| ()),
+        |b: &[u8]| dataset_io::decode_gray(b).map(|_| ()),
+    ] {
+        let e = decode(&big).unwrap_err();
+        assert!(
+            e.contains("corrupt JPEG") && e.contains("2305x12336"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn encoders_refuse_a_buffer_of_the_wrong_length() {
+    use dataset_io::{encode_jpeg_gray, encode_png_u16, encode_png_u8, PngSpeed};
+    assert!(encode_png_u8(4, 4, 1, &[0u8; 15], PngSpeed::Fast).is_err());
+    assert!(encode_png_u8(4, 4, 3, &[0u8; 16], PngSpeed::Fast).is_err());
+    assert!(encode_png_u8(4, 4, 2, &[0u8; 32], PngSpeed::Fast).is_err());
+    assert!(encode_png_u8(usize::MAX, 2, 1, &[0u8; 4], PngSpeed::Fast).is_err());
+    assert!(encode_png_u16(4, 4, &[0u16; 17], PngSpeed::Fast).is_err());
+    assert!(encode_jpeg_gray(4, 4, &[0u8; 3], 90).is_err());
+    assert!(encode_png_u8(4, 4, 1, &[0u8; 16], PngSpeed::Fast).is_ok());
+    assert!(encode_png_u16(4, 4, &[0u16; 16], PngSpeed::Fast).is_ok());
+}

@@ -464,8 +464,9 @@ pub struct SequenceSummary {
     pub e_align: Stat,
     /// `e_r` in degrees.
     pub e_r: Stat,
-    /// `e_s` as a multiplier (as the paper's table shows it; failed runs count as infinite).
-    pub e_s: Stat,
+    /// `e'_s = max(e_s, 1/e_s)`, the scale drift as a multiplier of at least 1, as the paper
+    /// summarises it (failed runs count as infinite).
+    pub e_s_prime: Stat,
 }
 
 /// Groups the records by method and sequence (and direction when `split_direction`) and
@@ -490,7 +491,7 @@ pub fn summarize(records: &[RunRecord], split_direction: bool) -> Vec<SequenceSu
                 failed: rs.iter().filter(|r| !r.is_ok()).count(),
                 e_align: Stat::of(&col(|m| m.e_align))?,
                 e_r: Stat::of(&col(|m| m.e_r))?,
-                e_s: Stat::of(&col(|m| m.e_s))?,
+                e_s_prime: Stat::of(&col(|m| m.e_s_sym()))?,
                 method,
                 sequence,
                 direction,
@@ -571,67 +572,4 @@ pub fn cumulative(
             }
         })
         .collect()
-}
-
-fn fmt_stat(v: f64, digits: usize) -> String {
-    if v.is_finite() {
-        format!("{v:.digits$}")
-    } else {
-        "∞".into()
-    }
-}
-
-/// The paper's per-sequence table as markdown: one row per sequence (and direction when the
-/// summaries are split), one column per method, each cell `e_align`, `e_r` and `e_s` as
-/// median (min–max) over the runs.
-pub fn markdown_table(summaries: &[SequenceSummary]) -> String {
-    let mut methods: Vec<&str> = summaries.iter().map(|s| s.method.as_str()).collect();
-    methods.sort_unstable();
-    methods.dedup();
-    let mut rows: BTreeMap<(String, Option<Direction>), BTreeMap<&str, &SequenceSummary>> =
-        BTreeMap::new();
-    for s in summaries {
-        rows.entry((s.sequence.clone(), s.direction))
-            .or_default()
-            .insert(s.method.as_str(), s);
-    }
-    let mut out = String::new();
-    out.push_str("| sequence |");
-    for m in &methods {
-        out.push_str(&format!(" {m} |"));
-    }
-    out.push_str("\n|---|");
-    for _ in &methods {
-        out.push_str("---|");
-    }
-    out.push('\n');
-    let cell = |name: &str, st: &Stat, d: usize| {
-        format!(
-            "{name} = {} ({}–{})",
-            fmt_stat(st.median, d),
-            fmt_stat(st.min, d),
-            fmt_stat(st.max, d)
-        )
-    };
-    for ((seq, dir), by_method) in &rows {
-        match dir {
-            Some(d) => out.push_str(&format!("| {seq} ({d}) |")),
-            None => out.push_str(&format!("| {seq} |")),
-        }
-        for m in &methods {
-            match by_method.get(m) {
-                Some(s) => out.push_str(&format!(
-                    " {}<br>{}<br>{}<br>{} run(s), {} failed |",
-                    cell("e_align", &s.e_align, 2),
-                    cell("e_r", &s.e_r, 2),
-                    cell("e_s", &s.e_s, 3),
-                    s.runs,
-                    s.failed
-                )),
-                None => out.push_str(" – |"),
-            }
-        }
-        out.push('\n');
-    }
-    out
 }

@@ -6,7 +6,7 @@
 //! * [`evaluate`] sorts, associates (1 ms), aligns the start and end segments by Sim(3)
 //!   ([`align_sim3`], Umeyama) and returns `e_align`, `e_s`, `e_r`, `e_t`, `e_rmse` and the
 //!   segment RMSEs. A run that cannot be evaluated is a *failed* result, not an error.
-//! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`markdown_table`], and the
+//! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`summary_table`], and the
 //!   results.csv format ([`write_csv`], [`parse_csv`]) for the paper's tables and plots.
 //!
 //! Geometry is [`nalgebra`]'s: positions are `Vector3<f64>`, [`Sim3`] converts to and from
@@ -38,18 +38,20 @@
 mod batch;
 mod evaluate;
 mod sim3;
+mod table;
 mod trajectory;
 
 pub use nalgebra;
 
 pub use batch::{
-    cumulative, evaluate_batch, markdown_table, parse_csv, summarize, write_csv, Cumulative,
-    Direction, DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+    cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
+    DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
 };
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
 pub use sim3::{align_sim3, rotation_angle, AlignFailure, Alignment, Sim3};
+pub use table::{markdown_table, summary_table, TableStyle, TABLE_CAPTION};
 pub use trajectory::{
     detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,
     TrajectoryFormat,
@@ -88,6 +90,17 @@ pub enum EvalError {
         t: f64,
         /// The timestamp before it.
         previous: f64,
+    },
+    /// A pose whose orientation is not a rotation: a quaternion of norm 0 (all zeros) or a
+    /// singular rotation matrix. NaN stays allowed (the run failed).
+    #[error("line {line}: `{found}`: the orientation is not a rotation ({what}); a pose needs a unit quaternion (or a rotation matrix)")]
+    NotARotation {
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        what: &'static str,
+        /// An excerpt of the line.
+        found: String,
     },
     /// A ground truth without rows.
     #[error("the ground truth has no rows")]

@@ -159,11 +159,25 @@ fn parse_fields<const N: usize>(
 
 const TUM_EXPECTED: &str = "8 numbers `t x y z qx qy qz qw`";
 
+/// Refuses a finite quaternion of (nearly) zero norm: no rotation, whatever the position.
+fn check_quaternion(line_no: usize, line: &str, q: [f64; 4]) -> Result<(), EvalError> {
+    let n2: f64 = q.iter().map(|v| v * v).sum();
+    if n2.is_finite() && n2 < 1e-12 {
+        return Err(EvalError::NotARotation {
+            line: line_no,
+            what: "the quaternion is zero",
+            found: excerpt(line),
+        });
+    }
+    Ok(())
+}
+
 /// Parses a TUM-format trajectory.
 pub fn parse_tum(text: &str) -> Result<Trajectory, EvalError> {
     let mut poses = Vec::with_capacity(text.len() / 80);
     for (no, line) in data_lines(text) {
         let v = parse_fields::<8>(no, line, TUM_EXPECTED, false)?;
+        check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
             t: v[0],
             position: Vector3::new(v[1], v[2], v[3]),
@@ -190,6 +204,14 @@ pub fn parse_kitti(poses_text: &str, times_text: &str) -> Result<Trajectory, Eva
             false,
         )?;
         let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
+        let det = r.determinant();
+        if det.is_finite() && det.abs() < 1e-6 {
+            return Err(EvalError::NotARotation {
+                line: no,
+                what: "the rotation matrix is singular",
+                found: excerpt(line),
+            });
+        }
         let orientation = if r.iter().all(|x| x.is_finite()) {
             // the quaternion of the matrix as written, with qw >= 0
             let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
@@ -230,6 +252,7 @@ pub fn parse_euroc(text: &str) -> Result<Trajectory, EvalError> {
             "at least 8 comma-separated numbers `timestamp_ns, px, py, pz, qw, qx, qy, qz`",
             true,
         )?;
+        check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
             t: v[0] * 1e-9,
             position: Vector3::new(v[1], v[2], v[3]),

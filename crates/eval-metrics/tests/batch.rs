@@ -174,8 +174,19 @@ fn summaries_and_cumulative_curves() {
         6
     );
     let table = markdown_table(&s);
-    assert!(table.starts_with("| sequence | bad | good |"), "{table}");
-    assert!(table.contains("sequence_01") && table.contains("∞"));
+    assert!(
+        table.contains("| sequence | method | runs | failed | e_align | e_r (deg) | e'_s (x) |"),
+        "{table}"
+    );
+    assert!(table.contains("| sequence_01 | bad |") && table.contains("∞"));
+    assert!(!table.contains("<br>"));
+    let text = eval_metrics::summary_table(&s, eval_metrics::TableStyle::Text);
+    assert!(
+        !text.contains('|') && !text.contains("<br>") && text.contains("inf"),
+        "{text}"
+    );
+    // e'_s = max(e_s, 1/e_s): a shrinking scale drift summarises as a multiplier above 1
+    assert!(s.iter().all(|x| x.e_s_prime.min >= 1.0), "{s:?}");
 }
 
 #[test]

@@ -131,16 +131,36 @@ fn byte_order_mark_crlf_double_blanks_and_decimal_commas() {
     assert!(matches!(e, EvalError::DecimalComma { line: 2, .. }), "{e}");
 }
 
+#[test]
+fn zero_quaternions_and_singular_rotations_are_refused_with_the_line() {
+    let e = parse_tum("1 0 0 0 0 0 0 1\n2 1 0 0 0 0 0 0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 2, .. }), "{e}");
+    assert!(e.to_string().contains("not a rotation"));
+    let e = parse_euroc("1000000000000,0,0,0,0,0,0,0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 1, .. }), "{e}");
+    let e = parse_kitti("0 0 0 1 0 0 0 2 0 0 0 3\n", "0.0\n").unwrap_err();
+    assert!(matches!(e, EvalError::NotARotation { line: 1, .. }), "{e}");
+    // NaN stays allowed: the run failed, it is not malformed
+    assert!(parse_tum("1 0 0 0 nan nan nan nan\n").is_ok());
+    // a non-unit quaternion is a rotation too
+    assert!(parse_tum("1 0 0 0 0 0 0 2\n").is_ok());
+}
+
 /// The camera-to-world transform of a TUM pose: position and normalised quaternion; none
-/// for a zero quaternion (the evaluation still uses the position).
+/// for a zero quaternion (which the parsers refuse, but a `Pose` can hold).
 #[test]
 fn world_from_camera_is_the_pose_as_an_isometry() {
-    let t = parse_tum("1 1 2 3 0 0 0 2\n2 1 2 3 0 0 0 0\n").unwrap();
+    let t = parse_tum("1 1 2 3 0 0 0 2\n").unwrap();
     let iso = t.poses[0].world_from_camera().unwrap();
     assert_eq!(iso.translation.vector, Vector3::new(1.0, 2.0, 3.0));
     assert!(iso.rotation.angle() < 1e-15);
-    assert!(t.poses[1].world_from_camera().is_none());
-    assert!(t.poses[1].is_finite());
+    let zero = eval_metrics::Pose {
+        t: 2.0,
+        position: Vector3::new(1.0, 2.0, 3.0),
+        orientation: Quaternion::new(0.0, 0.0, 0.0, 0.0),
+    };
+    assert!(zero.world_from_camera().is_none());
+    assert!(zero.is_finite());
     let json = serde_json::to_string(&t.poses[0]).unwrap();
     let back: eval_metrics::Pose = serde_json::from_str(&json).unwrap();
     assert_eq!(back, t.poses[0]);

@@ -246,7 +246,8 @@ pub struct QuantizedCorrection {
 }
 
 impl QuantizedCorrection {
-    /// Prepares the fused correction; `bits` is 8 or 16, `scale` multiplies `U(I) / V`.
+    /// Prepares the fused correction; `bits` is 8 or 16 (anything else is an error), `scale`
+    /// multiplies `U(I) / V`.
     pub fn new(
         response: &InverseResponse,
         vignette: &Vignette,
@@ -266,6 +267,11 @@ impl QuantizedCorrection {
         scale: f32,
         bits: u8,
     ) -> Result<QuantizedCorrection, PhotometricError> {
+        let max = match bits {
+            8 => 255,
+            16 => 65535,
+            other => return Err(PhotometricError::OutputDepth(other)),
+        };
         let in_size = map.input_size();
         let u = response.values();
         let u_max = u[255];
@@ -296,7 +302,7 @@ impl QuantizedCorrection {
             map,
             lut,
             base_gain,
-            max: if bits == 16 { 65535 } else { 255 },
+            max,
         })
     }
 

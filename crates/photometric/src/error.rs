@@ -66,6 +66,9 @@ pub enum PhotometricError {
     /// A bit depth outside 1..=16.
     #[error("bit depth {0} is not supported (1 to 16 bits per pixel)")]
     BitDepth(u32),
+    /// An output bit depth other than 8 or 16.
+    #[error("output depth {0} bits is not supported (8 or 16 bits per pixel)")]
+    OutputDepth(u8),
     /// A vignette that is zero everywhere or not finite.
     #[error("vignette: {0}")]
     Vignette(String),
@@ -89,6 +92,16 @@ pub enum PhotometricError {
     /// Calibration data that cannot determine the result.
     #[error("{0}")]
     Calibration(String),
+    /// A calibration option outside the values it can take.
+    #[error("calibration option `{name}` = {value}: expected {expected}")]
+    InvalidOption {
+        /// The option (the field of the options, the key of a config file).
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// What it can be.
+        expected: &'static str,
+    },
     /// An error of the camera model (rectification).
     #[error(transparent)]
     Camera(#[from] camera_model::CameraError),

@@ -63,9 +63,9 @@ pub struct ResponseOptions {
     /// Stop when the largest change of `U` (scaled to `U(255) = 255`) between two iterations
     /// is below this many grey levels.
     pub tolerance: f64,
-    /// Strength of the third-difference prior, relative to the strength the exposure steps
-    /// call for (see the module documentation); 0 leaves the data's blind directions to the
-    /// iteration.
+    /// The smallest scale, in grey values, over which the third-difference prior smooths
+    /// `U` (it smooths over more where the exposure steps leave longer ripples undetermined;
+    /// see the module documentation). Smaller values leave more to the data.
     pub smoothness: f64,
     /// Radius (pixels) of the neighbourhood dropped around saturated pixels.
     pub saturation_border: usize,
@@ -88,6 +88,59 @@ impl Default for ResponseOptions {
         }
     }
 }
+
+impl ResponseOptions {
+    /// Refuses options outside the values they can take (a config file or a caller may give
+    /// anything): what [`calibrate_response`] checks before any work.
+    pub fn check(&self) -> Result<(), PhotometricError> {
+        let bad = |name, value: String, expected| {
+            Err(PhotometricError::InvalidOption {
+                name,
+                value,
+                expected,
+            })
+        };
+        if !(1..=MAX_ITERATIONS_LIMIT).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                self.max_iterations.to_string(),
+                "1 to 100000 iterations",
+            );
+        }
+        if !self.tolerance.is_finite() || self.tolerance < 0.0 {
+            return bad(
+                "tolerance",
+                self.tolerance.to_string(),
+                "a finite number of grey levels, 0 or more",
+            );
+        }
+        if !self.smoothness.is_finite() || self.smoothness < 0.0 {
+            return bad(
+                "smoothness",
+                self.smoothness.to_string(),
+                "a finite number of grey values, 0 or more",
+            );
+        }
+        if self.saturation_border > 256 {
+            return bad(
+                "saturation_border",
+                self.saturation_border.to_string(),
+                "0 to 256 pixels",
+            );
+        }
+        if !self.censor_sigmas.is_finite() || self.censor_sigmas <= 0.0 {
+            return bad(
+                "censor_sigmas",
+                self.censor_sigmas.to_string(),
+                "a finite number of standard deviations above 0",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The largest `max_iterations` of the calibration options.
+pub(crate) const MAX_ITERATIONS_LIMIT: usize = 100_000;
 
 /// The result of [`calibrate_response`].
 #[derive(Clone, Debug, serde::Serialize)]
@@ -1290,6 +1343,7 @@ pub fn calibrate_response(
     options: &ResponseOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<ResponseCalibration, PhotometricError> {
+    options.check()?;
     let n = frames.len();
     if n < 2 {
         return Err(PhotometricError::Calibration(format!(

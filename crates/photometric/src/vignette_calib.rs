@@ -105,6 +105,66 @@ impl Default for VignetteOptions {
     }
 }
 
+impl VignetteOptions {
+    /// Refuses options outside the values they can take (a config file or a caller may give
+    /// anything): what [`calibrate_vignette`] checks before any work. The plane grid is at
+    /// most 4096 cells a side (the paper's is 1000; the memory grows with its square).
+    pub fn check(&self) -> Result<(), PhotometricError> {
+        let bad = |name, value: String, expected| {
+            Err(PhotometricError::InvalidOption {
+                name,
+                value,
+                expected,
+            })
+        };
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !(1..=crate::response_calib::MAX_ITERATIONS_LIMIT).contains(&self.max_iterations) {
+            return bad(
+                "max_iterations",
+                self.max_iterations.to_string(),
+                "1 to 100000 iterations",
+            );
+        }
+        if !non_negative(self.tolerance) {
+            return bad(
+                "tolerance",
+                self.tolerance.to_string(),
+                "a finite relative change, 0 or more",
+            );
+        }
+        if !(8..=4096).contains(&self.grid) {
+            return bad("grid", self.grid.to_string(), "8 to 4096 cells per side");
+        }
+        if !self.extent.is_finite() || self.extent <= 0.0 {
+            return bad(
+                "extent",
+                self.extent.to_string(),
+                "a finite number of marker widths above 0",
+            );
+        }
+        if self.outlier_sigmas.is_nan() || self.outlier_sigmas <= 0.0 {
+            return bad(
+                "outlier_sigmas",
+                self.outlier_sigmas.to_string(),
+                "a number of standard deviations above 0",
+            );
+        }
+        if !non_negative(self.registration_px) {
+            return bad(
+                "registration_px",
+                self.registration_px.to_string(),
+                "a finite number of pixels, 0 or more",
+            );
+        }
+        if let Some(s) = self.smoothing_px {
+            if !non_negative(s) || s > 1000.0 {
+                return bad("smoothing_px", s.to_string(), "0 to 1000 pixels");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The result of [`calibrate_vignette`].
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct VignetteCalibration {
@@ -380,14 +440,38 @@ impl Tables {
     }
 }
 
-/// Frames per parallel job: consecutive frames share their accumulators.
+/// Parallel jobs of a pass over the frames: consecutive frames share their accumulators.
+const FRAME_JOBS: usize = 8;
+
+/// The frames of each job: a partition of the frames that does not depend on the number of
+/// threads, so that every sum is taken in the same order with any number of threads.
 fn frame_jobs(n: usize) -> Vec<std::ops::Range<usize>> {
-    let jobs = rayon::current_num_threads().clamp(1, n.max(1));
+    let jobs = FRAME_JOBS.clamp(1, n.max(1));
     let per = n.div_ceil(jobs);
     (0..jobs)
         .map(|j| (j * per).min(n)..((j + 1) * per).min(n))
         .filter(|r| !r.is_empty())
         .collect()
+}
+
+/// Runs `job` on the frames of every job of [`frame_jobs`], as many at a time as there are
+/// threads, and hands the results to `add` in the order of the jobs: the same bits with one
+/// thread or many, and at most one job's accumulators per thread in memory.
+fn fold_frame_jobs<T: Send>(
+    n: usize,
+    job: impl Fn(std::ops::Range<usize>) -> Result<T, PhotometricError> + Sync,
+    mut add: impl FnMut(T),
+) -> Result<(), PhotometricError> {
+    let jobs = frame_jobs(n);
+    let wave = rayon::current_num_threads().max(1);
+    for chunk in jobs.chunks(wave) {
+        let parts: Vec<T> = chunk
+            .par_iter()
+            .map(|range| job(range.clone()))
+            .collect::<Result<_, _>>()?;
+        parts.into_iter().for_each(&mut add);
+    }
+    Ok(())
 }
 
 /// One pass over the data with `V` and `C` as they are: the sums of the V step (the exact
@@ -405,105 +489,102 @@ fn pass(
     let reg2 = p.options.registration_px * p.options.registration_px;
     let out2 = p.options.outlier_sigmas * p.options.outlier_sigmas;
     let u = &p.u;
-    let parts: Vec<(VSums, Vec<f32>, Vec<f32>)> = frame_jobs(p.frames.len())
-        .into_par_iter()
-        .map(
-            |range| -> Result<(VSums, Vec<f32>, Vec<f32>), PhotometricError> {
-                let mut acc = VSums::new(npx);
-                let cells_needed = if want_c { ncell } else { 0 };
-                let mut cnum = vec![0.0f32; cells_needed];
-                let mut cden = vec![0.0f32; cells_needed];
-                for i in range {
-                    let Some(pf) = p.prepare(i)? else {
+    let cells_needed = if want_c { ncell } else { 0 };
+    let mut total = VSums::new(npx);
+    let mut num_total = vec![0.0f64; cells_needed];
+    let mut den_total = vec![0.0f64; cells_needed];
+    fold_frame_jobs(
+        p.frames.len(),
+        |range| -> Result<(VSums, Vec<f32>, Vec<f32>), PhotometricError> {
+            let mut acc = VSums::new(npx);
+            let mut cnum = vec![0.0f32; cells_needed];
+            let mut cden = vec![0.0f32; cells_needed];
+            for i in range {
+                let Some(pf) = p.prepare(i)? else {
+                    continue;
+                };
+                let t = pf.frame.exposure_ms;
+                let odd = i % 2 == 1;
+                let inv_cpp2 = 1.0 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+                let data = pf.frame.image.data();
+                for (px, &pix) in p.sample.iter().enumerate() {
+                    let k = data[pix as usize];
+                    if k == 255 {
+                        continue;
+                    }
+                    let Some(g) = grid_coords(p.rays[pix as usize], &pf.m, p.grid) else {
                         continue;
                     };
-                    let t = pf.frame.exposure_ms;
-                    let odd = i % 2 == 1;
-                    let inv_cpp2 = 1.0 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
-                    let data = pf.frame.image.data();
-                    for (px, &pix) in p.sample.iter().enumerate() {
-                        let k = data[pix as usize];
-                        if k == 255 {
-                            continue;
-                        }
-                        let Some(g) = grid_coords(p.rays[pix as usize], &pf.m, p.grid) else {
-                            continue;
-                        };
-                        let (idx, wt, fx, fy) = taps(g, p.grid);
-                        let cs = [
-                            model.c[idx[0]] as f64,
-                            model.c[idx[1]] as f64,
-                            model.c[idx[2]] as f64,
-                            model.c[idx[3]] as f64,
-                        ];
-                        let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
-                        let vx = model.v[px];
-                        let tv = t * vx;
-                        if tv.is_nan() || tv <= 0.0 || cq.is_nan() || cq < 0.0 {
-                            continue;
-                        }
-                        let tc = t * cq;
-                        let obs = u[k as usize];
-                        let pred = tc * vx;
-                        let gx = (cs[1] - cs[0]) * (1.0 - fy) + (cs[3] - cs[2]) * fy;
-                        let gy = (cs[2] - cs[0]) * (1.0 - fx) + (cs[3] - cs[1]) * fx;
-                        let bin = tables.bin(pred);
-                        // sensor noise plus the error a misregistration makes where C has edges
-                        let vr = tables.var[bin] + tv * tv * (gx * gx + gy * gy) * inv_cpp2 * reg2;
-                        let r = obs - pred;
-                        if model.reject && r * r > out2 * vr {
-                            acc.outliers += 1;
-                            continue;
-                        }
-                        let w = 1.0 / vr;
-                        if want_c {
-                            let (a, b) = ((w * tv * r) as f32, (w * tv * tv) as f32);
-                            for j in 0..4 {
-                                cnum[idx[j]] += wt[j] as f32 * a;
-                                cden[idx[j]] += wt[j] as f32 * b;
-                            }
-                        }
-                        if cq <= 0.0 {
-                            continue;
-                        }
-                        acc.num[px] += w * tc * obs;
-                        acc.den[px] += w * tc * tc;
-                        if odd {
-                            acc.num_odd[px] += w * tc * obs;
-                            acc.den_odd[px] += w * tc * tc;
-                        }
-                        acc.counts[px] += 1;
-                        acc.chi2 += r * r * w;
-                        acc.nobs += 1;
-                        acc.pred2 += pred * pred;
-                        acc.res2 += r * r;
-                        let kp = tables.grey[bin] as usize;
-                        acc.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
-                        acc.rcnt[kp] += 1.0;
+                    let (idx, wt, fx, fy) = taps(g, p.grid);
+                    let cs = [
+                        model.c[idx[0]] as f64,
+                        model.c[idx[1]] as f64,
+                        model.c[idx[2]] as f64,
+                        model.c[idx[3]] as f64,
+                    ];
+                    let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
+                    let vx = model.v[px];
+                    let tv = t * vx;
+                    if tv.is_nan() || tv <= 0.0 || cq.is_nan() || cq < 0.0 {
+                        continue;
                     }
+                    let tc = t * cq;
+                    let obs = u[k as usize];
+                    let pred = tc * vx;
+                    let gx = (cs[1] - cs[0]) * (1.0 - fy) + (cs[3] - cs[2]) * fy;
+                    let gy = (cs[2] - cs[0]) * (1.0 - fx) + (cs[3] - cs[1]) * fx;
+                    let bin = tables.bin(pred);
+                    // sensor noise plus the error a misregistration makes where C has edges
+                    let vr = tables.var[bin] + tv * tv * (gx * gx + gy * gy) * inv_cpp2 * reg2;
+                    let r = obs - pred;
+                    if model.reject && r * r > out2 * vr {
+                        acc.outliers += 1;
+                        continue;
+                    }
+                    let w = 1.0 / vr;
+                    if want_c {
+                        let (a, b) = ((w * tv * r) as f32, (w * tv * tv) as f32);
+                        for j in 0..4 {
+                            cnum[idx[j]] += wt[j] as f32 * a;
+                            cden[idx[j]] += wt[j] as f32 * b;
+                        }
+                    }
+                    if cq <= 0.0 {
+                        continue;
+                    }
+                    acc.num[px] += w * tc * obs;
+                    acc.den[px] += w * tc * tc;
+                    if odd {
+                        acc.num_odd[px] += w * tc * obs;
+                        acc.den_odd[px] += w * tc * tc;
+                    }
+                    acc.counts[px] += 1;
+                    acc.chi2 += r * r * w;
+                    acc.nobs += 1;
+                    acc.pred2 += pred * pred;
+                    acc.res2 += r * r;
+                    let kp = tables.grey[bin] as usize;
+                    acc.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
+                    acc.rcnt[kp] += 1.0;
                 }
-                Ok((acc, cnum, cden))
-            },
-        )
-        .collect::<Result<_, _>>()?;
-    let mut total = VSums::new(npx);
+            }
+            Ok((acc, cnum, cden))
+        },
+        |(acc, cnum, cden)| {
+            total.add(&acc);
+            for (t, v) in num_total.iter_mut().zip(&cnum) {
+                *t += *v as f64;
+            }
+            for (t, v) in den_total.iter_mut().zip(&cden) {
+                *t += *v as f64;
+            }
+        },
+    )?;
     let mut c = model.c.clone();
-    for (j, cj) in c
-        .iter_mut()
-        .enumerate()
-        .take(if want_c { ncell } else { 0 })
-    {
-        let (mut nu, mut de) = (0.0f64, 0.0f64);
-        for part in &parts {
-            nu += part.1[j] as f64;
-            de += part.2[j] as f64;
-        }
-        if de > 0.0 {
+    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
+        if *de > 0.0 {
             *cj = (*cj as f64 + nu / de).max(0.0) as f32;
         }
-    }
-    for part in &parts {
-        total.add(&part.0);
     }
     Ok((total, c))
 }
@@ -675,6 +756,7 @@ pub fn calibrate_vignette(
     options: &VignetteOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<VignetteCalibration, PhotometricError> {
+    options.check()?;
     if frames.is_empty() {
         return Err(PhotometricError::Calibration(
             "vignette calibration needs at least one frame with a plane pose".into(),

@@ -198,3 +198,26 @@ fn deep_frames_are_corrected_exactly() {
         .unwrap();
     assert_eq!(out.get(0, 0), Some(255.0));
 }
+
+/// The fused path writes 8 or 16 bits; any other depth is an error, never 8 bits in disguise.
+#[test]
+fn fused_path_refuses_other_output_depths() {
+    use photometric::{PhotometricError, QuantizedCorrection};
+    let cam =
+        CameraFile::parse("FOV 0.5357 0.6696 0.4932 0.5004 0.898\n160 128\ncrop\n80 60\n").unwrap();
+    let map = RectifyMap::for_mode(
+        &cam.input,
+        cam.input_size,
+        &OutputMode::Crop,
+        cam.output_size,
+    )
+    .unwrap();
+    let u = InverseResponse::new(ground_truth_response()).unwrap();
+    for bits in [0u8, 1, 10, 12, 32] {
+        assert!(matches!(
+            QuantizedCorrection::with_vignette(&u, None, map.clone(), 1.0, bits),
+            Err(PhotometricError::OutputDepth(b)) if b == bits
+        ));
+    }
+    assert!(QuantizedCorrection::with_vignette(&u, None, map, 1.0, 8).is_ok());
+}

@@ -219,3 +219,35 @@ fn unusable_sweeps_are_refused_with_the_reason() {
     let e = calibrate_response(&mut frames(&s), &s.exposures_ms, &opts, &|_, _| {}).unwrap_err();
     assert!(e.to_string().contains("longer exposures"), "{e}");
 }
+
+/// Options outside the values they can take are an error naming the option, before any work.
+#[test]
+fn absurd_options_are_refused() {
+    assert!(ResponseOptions::default().check().is_ok());
+    assert!(photometric::VignetteOptions::default().check().is_ok());
+    let r = |f: fn(&mut ResponseOptions)| {
+        let mut o = ResponseOptions::default();
+        f(&mut o);
+        o.check().unwrap_err().to_string()
+    };
+    assert!(r(|o| o.saturation_border = usize::MAX).contains("`saturation_border`"));
+    assert!(r(|o| o.tolerance = f64::NAN).contains("`tolerance`"));
+    assert!(r(|o| o.max_iterations = 0).contains("`max_iterations`"));
+    let v = |f: fn(&mut photometric::VignetteOptions)| {
+        let mut o = photometric::VignetteOptions::default();
+        f(&mut o);
+        o.check().unwrap_err().to_string()
+    };
+    assert!(v(|o| o.grid = 1 << 40).contains("`grid`"));
+    assert!(v(|o| o.extent = -1.0).contains("`extent`"));
+    assert!(v(|o| o.smoothing_px = Some(f64::INFINITY)).contains("`smoothing_px`"));
+    assert!(v(|o| o.registration_px = f64::NAN).contains("`registration_px`"));
+    // and the calibration itself refuses them before looking at the frames
+    let mut frames = vec![Image::new(2, 2, vec![0u8; 4]).unwrap(); 2];
+    let bad = ResponseOptions {
+        saturation_border: usize::MAX,
+        ..ResponseOptions::default()
+    };
+    let e = calibrate_response(&mut frames, &[1.0, 2.0], &bad, &|_, _| {}).unwrap_err();
+    assert!(matches!(e, PhotometricError::InvalidOption { .. }), "{e}");
+}

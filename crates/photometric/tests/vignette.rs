@@ -105,6 +105,30 @@ fn high_noise_jpeg_set_is_accurate_and_its_errors_calibrated() {
     }
 }
 
+/// Threads change nothing: the same bits with one and with two threads (the frames are
+/// split into the same jobs and their sums added in the same order).
+#[test]
+fn results_do_not_depend_on_the_number_of_threads() {
+    let f = set(9, 160, 128, 40, Sensor::preset(NoiseLevel::Typical));
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| calibrate(&f).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    let bits = |i: &Image<f32>| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert!(bits(&a.vignette) == bits(&b.vignette), "vignette");
+    assert!(bits(&a.raw) == bits(&b.raw), "raw map");
+    assert!(bits(&a.std_error) == bits(&b.std_error), "standard error");
+    assert_eq!(a.counts.data(), b.counts.data());
+    assert_eq!(
+        (a.iterations, a.outliers, a.smoothing.sigma_px.to_bits()),
+        (b.iterations, b.outliers, b.smoothing.sigma_px.to_bits())
+    );
+}
+
 /// A corner that never sees the plane is refused, not invented.
 #[test]
 fn an_uncovered_corner_is_refused() {

@@ -250,6 +250,8 @@ pub fn response_options(a: &ResponseArgs) -> Result<ResponseOptions> {
     o.max_iterations = o.max_iterations.max(1);
     o.smoothness = o.smoothness.max(0.0);
     o.censor_sigmas = o.censor_sigmas.max(0.5);
+    o.check()
+        .with_context(|| options_source(a.config.as_deref()))?;
     Ok(o)
 }
 
@@ -269,7 +271,17 @@ pub fn vignette_options(a: &VignetteArgs) -> Result<photometric::VignetteOptions
     o.max_iterations = o.max_iterations.max(1);
     o.smoothing_px = o.smoothing_px.map(|s| s.max(0.0));
     o.registration_px = o.registration_px.max(0.0);
+    o.check()
+        .with_context(|| options_source(a.config.as_deref()))?;
     Ok(o)
+}
+
+/// Where the calibration options came from, for an error about one of them.
+fn options_source(config: Option<&Path>) -> String {
+    match config {
+        Some(p) => format!("the calibration options (the flags and {})", p.display()),
+        None => "the calibration options".into(),
+    }
 }
 
 /// `stem_suffix.ext` beside `path` (`vignette.png` -> `vignette_raw.png`).
@@ -293,24 +305,26 @@ fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
 
 /// Reads every frame of a sequence with its exposure; errors when exposures are missing.
 pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
-    if !seq.times().has_exposures() {
+    if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
-            "{}: calibration needs the exposure time of every frame (third column, > 0)",
+            "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); calibration needs the exposure time of every frame (third column, > 0)",
             seq.times_path().display()
         );
     }
     let idx = seq.indices(0..seq.len(), false);
-    let pb = progress::bar(idx.len() as u64, "decoding");
+    let pb = progress::bar(idx.len() as u64, "decoding", "frames");
     let mut frames = Vec::with_capacity(idx.len());
     let mut exposures = Vec::with_capacity(idx.len());
     seq.process(
         &idx,
         rayon::current_num_threads() * 4,
-        Ok::<_, anyhow::Error>,
+        |f| {
+            pb.inc(1);
+            Ok::<_, anyhow::Error>(f)
+        },
         |f| {
             exposures.push(f.exposure_ms.unwrap_or(0.0));
             frames.push(f.image);
-            pb.inc(1);
             Ok(())
         },
     )?;
@@ -358,7 +372,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     }
     check_outputs(&outs, a.force)?;
     let opts = response_options(a)?;
-    let seq = Sequence::open(&a.sequence)?;
+    let seq = crate::cmd::open_sequence(&a.sequence)?;
     if seq.len() < 2 {
         bail!(
             "{}: response calibration needs at least 2 frames at different exposures, found {}",
@@ -369,7 +383,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     let (mut frames, exposures) = load_exposed_frames(&seq)?;
     let report = sweep_report(&frames, &exposures);
     if !a.json {
-        println!("{report}");
+        outln!("{report}")?;
     }
     let pb = progress::spinner("calibrating");
     let cal = calibrate_response(&mut frames, &exposures, &opts, &|i, change| {
@@ -381,7 +395,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     .with_context(|| format!("{}", a.sequence.display()))?;
     pb.finish_and_clear();
     for w in &cal.warnings {
-        eprintln!("monovo: warning: {w}");
+        crate::warn(format_args!("{w}"));
     }
     dataset_io::write_atomic(&a.output, cal.response.to_text().as_bytes())?;
     let std_text = cal
@@ -396,7 +410,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     }
     let max_std = cal.std_error[..255].iter().copied().fold(0.0, f64::max);
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
@@ -420,9 +434,9 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "histogram": cal.histogram,
                 "warnings": cal.warnings,
             })
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "{} after {} iterations (last change {:.4} grey values); residual RMS {:.3} grey values",
             if cal.converged {
                 "converged"
@@ -432,19 +446,19 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
             cal.iterations,
             cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rmse
-        );
-        println!(
+        )?;
+        outln!(
             "noise: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2; observations used where the prediction is {:.0}..{:.0}",
             cal.noise.read, cal.noise.shot, cal.noise.adc, cal.censor_range.0, cal.censor_range.1
-        );
-        println!(
+        )?;
+        outln!(
             "U determined by the data for grey values {}..{}; {} value(s) continued by the prior; largest standard error {:.3} grey values",
             cal.observed_range.0,
             cal.observed_range.1,
             cal.filled.len(),
             max_std
-        );
-        println!("wrote {} and {}", a.output.display(), std_path.display());
+        )?;
+        outln!("wrote {} and {}", a.output.display(), std_path.display())?;
     }
     Ok(())
 }
@@ -741,20 +755,18 @@ fn plane_poses(
         .with_context(|| cam_path.display().to_string())?;
     let map = RectifyMap::new(&cam.input, cam.input_size, k_out, cam.output_size)?;
     let idx = seq.indices(0..seq.len(), false);
-    let pb = progress::bar(idx.len() as u64, "markers");
+    let pb = progress::bar(idx.len() as u64, "markers", "frames");
     let mut found: Vec<(usize, PoseFromMarker)> = Vec::new();
     seq.process(
         &idx,
         rayon::current_num_threads() * 4,
         |f| -> Result<(usize, PoseFromMarker)> {
-            Ok((
-                f.index,
-                photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?,
-            ))
+            let r = photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?;
+            pb.inc(1);
+            Ok((f.index, r))
         },
         |r| {
             found.push(r);
-            pb.inc(1);
             Ok(())
         },
     )?;
@@ -787,7 +799,7 @@ pub struct VignetteRun {
 /// Poses (from the marker or `--poses`) and the calibration, without writing anything.
 pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
     let opts = vignette_options(a)?;
-    let seq = Sequence::open(&a.sequence)?;
+    let seq = crate::cmd::open_sequence(&a.sequence)?;
     let cam_path = a.sequence.join("camera.txt");
     let Some(cam) = seq.camera() else {
         bail!(
@@ -803,9 +815,9 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
     })?;
     let response = photometric::InverseResponse::parse(&dataset_io::read_text(&pcalib_path)?)
         .with_context(|| pcalib_path.display().to_string())?;
-    if !seq.times().has_exposures() {
+    if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
-            "{}: vignette calibration needs the exposure time of every frame (third column, > 0)",
+            "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); vignette calibration needs the exposure time of every frame (third column, > 0)",
             seq.times_path().display()
         );
     }
@@ -820,7 +832,7 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
         );
     }
     if !a.json {
-        println!(
+        outln!(
             "{} of {} frames have a plane pose{}",
             frames.len(),
             seq.len(),
@@ -836,21 +848,26 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
                         .join(", ")
                 )
             }
-        );
+        )?;
     }
     let bytes = frames.len() * cam.input_size.pixels();
     let decoded = if bytes <= DECODED_CACHE_BYTES {
         let idx: Vec<usize> = frames.iter().map(|f| f.0).collect();
         let mut out = Vec::with_capacity(idx.len());
+        let pb = progress::bar(idx.len() as u64, "decoding", "frames");
         seq.process(
             &idx,
             rayon::current_num_threads() * 4,
-            |f| Ok::<_, anyhow::Error>(f.image),
+            |f| {
+                pb.inc(1);
+                Ok::<_, anyhow::Error>(f.image)
+            },
             |img| {
                 out.push(img);
                 Ok(())
             },
         )?;
+        pb.finish_and_clear();
         out
     } else {
         Vec::new()
@@ -903,7 +920,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
     } = calibrate_vignette_sequence(a)?;
     let skipped_total: usize = skipped.values().sum();
     for w in &cal.warnings {
-        eprintln!("monovo: warning: {w}");
+        crate::warn(format_args!("{w}"));
     }
     let (w, h) = cal.vignette.size();
     let to16 = |values: &[f32], scale: f32| -> Vec<u16> {
@@ -987,7 +1004,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         v.get(v.len() / 2).copied().unwrap_or(0.0)
     };
     if a.json {
-        println!(
+        outln!(
             "{}",
             serde_json::json!({
                 "output": a.output.display().to_string(),
@@ -1015,9 +1032,9 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
                 "warnings": cal.warnings,
             })
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "{} after {} iterations (last change {:.4}%); relative residual RMS {:.4}; {} outliers dropped",
             if cal.converged {
                 "converged"
@@ -1028,14 +1045,14 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
             100.0 * cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rms_relative,
             cal.outliers
-        );
-        println!(
+        )?;
+        outln!(
             "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out",
             100.0 * cal.coverage,
             options.min_observations,
             cal.smoothing.defects
-        );
-        println!(
+        )?;
+        outln!(
             "smoothing of {}: {:.1} px ({}); median standard error {:.3}%",
             a.output.display(),
             cal.smoothing.sigma_px,
@@ -1045,14 +1062,14 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "given"
             },
             100.0 * sd_median
-        );
-        println!(
+        )?;
+        outln!(
             "wrote {}, {}, {} and {}",
             a.output.display(),
             raw_path.display(),
             std_path.display(),
             cov_path.display()
-        );
+        )?;
     }
     Ok(())
 }

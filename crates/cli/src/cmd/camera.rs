@@ -13,8 +13,8 @@ use camera_model::{
 #[command(after_help = "\
 Examples:
   monovo camera sequence_01/camera.txt
-  monovo camera camera.txt --output full --size 640x480
-  monovo camera camera.txt --output \"0.4 0.5333 0.5 0.5 0\" --json
+  monovo camera camera.txt --pinhole full --size 640x480
+  monovo camera camera.txt --pinhole \"0.4 0.5333 0.5 0.5 0\" --json
 
 The file is read as DSO reads it: lines after line 4 are ignored (listed below the cameras),
 extra numbers after a model's parameters too; every such difference is a warning on stderr.
@@ -26,9 +26,14 @@ ignored, as in DSO), and `fx fy cx cy 0` is an explicit pinhole relative to the 
 pub struct Args {
     /// The camera.txt file (DSO/benchmark format, 4 lines).
     pub camera_txt: PathBuf,
-    /// Output camera, overriding line 3: crop, full, none, or "fx fy cx cy 0".
-    #[arg(long, value_name = "MODE")]
-    pub output: Option<OutputMode>,
+    /// The output pinhole camera, overriding line 3: crop, full, none, or "fx fy cx cy 0".
+    #[arg(
+        long = "pinhole",
+        alias = "output",
+        alias = "output-camera",
+        value_name = "MODE"
+    )]
+    pub pinhole: Option<OutputMode>,
     /// Output size WIDTHxHEIGHT, overriding line 4.
     #[arg(long, value_name = "WxH")]
     pub size: Option<ImageSize>,
@@ -55,55 +60,67 @@ fn model_field_of_view(model: &CameraModel, size: ImageSize) -> Option<(f64, f64
 /// Runs `monovo camera`.
 pub fn run(args: &Args) -> Result<()> {
     let path = &args.camera_txt;
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read camera file {}", path.display()))?;
+    let text = dataset_io::read_text(path).context("the camera file")?;
     let file = CameraFile::parse(&text).with_context(|| format!("{}", path.display()))?;
-    let mode = args.output.unwrap_or(file.output);
+    let mode = args.pinhole.unwrap_or(file.output);
     let out_size = args.size.unwrap_or(file.output_size);
     for w in
         file.warnings
             .iter()
             .chain(&output_notes(&file.input, file.input_size, &mode, out_size))
     {
-        eprintln!("monovo: warning: {}: {w}", path.display());
+        crate::warn(format_args!("{}: {w}", path.display()));
     }
     let map = RectifyMap::for_mode(&file.input, file.input_size, &mode, out_size)
         .with_context(|| format!("{}: output camera `{mode}` at {out_size}", path.display()))?;
     let k = map.camera();
+    if mode == OutputMode::Crop && map.invalid_count() > 0 {
+        crate::warn(format_args!(
+            "{}: `crop` at {out_size} leaves {} output pixels without a source; a smaller --size or another --pinhole avoids them",
+            path.display(),
+            map.invalid_count()
+        ));
+    }
     if args.json {
         let obj = serde_json::json!({
             "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
             "width": out_size.width, "height": out_size.height,
         });
-        println!("{obj}");
+        outln!("{obj}")?;
         return Ok(());
     }
-    println!("input:  {} ({})", file.input, file.input_size);
+    outln!("input:  {} ({})", file.input, file.input_size)?;
     if let Some((h, v)) = model_field_of_view(&file.input, file.input_size) {
-        println!("        field of view {h:.1} x {v:.1} degrees");
+        outln!("        field of view {h:.1} x {v:.1} degrees")?;
     }
-    println!(
+    outln!(
         "output: {mode} -> Pinhole fx={:.3} fy={:.3} cx={:.3} cy={:.3} ({out_size})",
-        k.fx, k.fy, k.cx, k.cy
-    );
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy
+    )?;
     let (h, v) = k.field_of_view_deg(out_size.width, out_size.height);
-    println!("        field of view {h:.1} x {v:.1} degrees");
+    outln!("        field of view {h:.1} x {v:.1} degrees")?;
     let rel = intrinsics_to_file_values(&k, out_size);
-    println!(
+    outln!(
         "        camera.txt line 3: {} {} {} {} 0",
-        rel[0], rel[1], rel[2], rel[3]
-    );
+        rel[0],
+        rel[1],
+        rel[2],
+        rel[3]
+    )?;
     let invalid = map.invalid_count();
-    println!(
+    outln!(
         "        invalid (black) pixels: {invalid} ({:.2}%)",
         100.0 * invalid as f64 / out_size.pixels() as f64
-    );
+    )?;
     if !file.ignored_lines.is_empty() {
-        println!("ignored (DSO reads only lines 1-4):");
+        outln!("ignored (DSO reads only lines 1-4):")?;
         for (no, line) in &file.ignored_lines {
             let shown: String = line.chars().take(70).collect();
             let more = if shown.len() < line.len() { "..." } else { "" };
-            println!("        line {no}: {shown}{more}");
+            outln!("        line {no}: {shown}{more}")?;
         }
     }
     Ok(())

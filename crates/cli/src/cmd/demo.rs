@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use camera_model::{Image, ImageSize};
 use dataset_io::{OutputDir, Sequence};
 use eval_metrics::{
-    cumulative, evaluate, parse_csv, summarize, DirectionFilter, GroundTruth, Metric, RunRecord,
+    cumulative, evaluate, summarize, DirectionFilter, GroundTruth, Metric, RunRecord,
 };
 use synthetic::trajectory::{
     benchmark_path, estimate, tum_text, Drift, EstimateConfig, PathConfig,
@@ -30,18 +30,28 @@ Generates a small benchmark with known truth and runs every job on it:
   4. rectifies the sequence to a pinhole camera and undoes response and vignetting
   5. 1000 runs of two synthetic VO methods (50 sequences x fwd/bwd x 5 runs); evaluates all
   6. the paper's cumulative error plots, its metric study, an alignment figure, a table
-and writes summary.md. Takes well under a minute on two cores.")]
+and writes summary.md. Takes about a minute on two cores. DIR must not exist unless --force,
+and --force replaces only a folder that an earlier demo wrote (or an empty one).")]
 pub struct Args {
-    /// Output folder (replaced if an earlier demo wrote it).
+    /// Output folder (must not exist unless --force).
     #[arg(short, long, default_value = "monovo-demo", value_name = "DIR")]
     pub output: PathBuf,
+    /// Replace the folder of an earlier demo.
+    #[arg(long)]
+    pub force: bool,
     /// Random seed of every synthetic data set.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Print one JSON object (the results and the files) instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
-fn step(n: usize, what: &str) {
-    println!("[{n}/7] {what}");
+fn step(quiet: bool, n: usize, what: &str) -> Result<()> {
+    if !quiet {
+        outln!("[{n}/7] {what}")?;
+    }
+    Ok(())
 }
 
 /// The paper's metric study: a x0.8 scale jump or a 10 degree rotation jump injected at each
@@ -108,57 +118,138 @@ fn fmt_stat(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.3}")
     } else {
-        "∞".into()
+        "inf".into()
     }
 }
 
-fn method_summary(records: &[RunRecord]) -> String {
-    let mut s = String::from(
-        "| method | runs | failed | median e_align | median e_r (deg) | median e'_s |\n|---|---|---|---|---|---|\n",
+/// One method's line of the demo's summary.
+struct MethodLine {
+    method: String,
+    runs: usize,
+    failed: usize,
+    e_align: f64,
+    e_r: f64,
+    e_s_prime: f64,
+}
+
+fn method_lines(records: &[RunRecord]) -> Vec<MethodLine> {
+    cumulative(records, Metric::EAlign, DirectionFilter::Both)
+        .into_iter()
+        .map(|c| {
+            let rs: Vec<&RunRecord> = records.iter().filter(|r| r.key.method == c.label).collect();
+            let med = |m: Metric| {
+                let v: Vec<f64> = rs.iter().map(|r| m.value(&r.metrics)).collect();
+                eval_metrics::Stat::of(&v).map_or(f64::NAN, |s| s.median)
+            };
+            MethodLine {
+                runs: c.runs,
+                failed: c.runs - c.values.len(),
+                e_align: med(Metric::EAlign),
+                e_r: med(Metric::ER),
+                e_s_prime: med(Metric::ES),
+                method: c.label,
+            }
+        })
+        .collect()
+}
+
+const METHOD_HEADER: [&str; 6] = [
+    "method",
+    "runs",
+    "failed",
+    "median e_align",
+    "median e_r (deg)",
+    "median e'_s",
+];
+
+fn method_markdown(lines: &[MethodLine]) -> String {
+    let mut s = format!(
+        "| {} |\n|---|--:|--:|--:|--:|--:|\n",
+        METHOD_HEADER.join(" | ")
     );
-    for c in cumulative(records, Metric::EAlign, DirectionFilter::Both) {
-        let rs: Vec<&RunRecord> = records.iter().filter(|r| r.key.method == c.label).collect();
-        let med = |m: Metric| {
-            let v: Vec<f64> = rs.iter().map(|r| m.value(&r.metrics)).collect();
-            eval_metrics::Stat::of(&v).map_or(f64::NAN, |s| s.median)
-        };
+    for l in lines {
         let _ = writeln!(
             s,
             "| {} | {} | {} | {} | {} | {} |",
-            c.label,
-            c.runs,
-            c.runs - c.values.len(),
-            fmt_stat(med(Metric::EAlign)),
-            fmt_stat(med(Metric::ER)),
-            fmt_stat(med(Metric::ES))
+            l.method,
+            l.runs,
+            l.failed,
+            fmt_stat(l.e_align),
+            fmt_stat(l.e_r),
+            fmt_stat(l.e_s_prime)
         );
     }
     s
+}
+
+fn method_text(lines: &[MethodLine]) -> String {
+    let w = lines
+        .iter()
+        .map(|l| l.method.len())
+        .max()
+        .unwrap_or(0)
+        .max(6);
+    let mut s = format!(
+        "  {:<w$}  {:>5}  {:>6}  {:>14}  {:>16}  {:>11}\n",
+        METHOD_HEADER[0],
+        METHOD_HEADER[1],
+        METHOD_HEADER[2],
+        METHOD_HEADER[3],
+        METHOD_HEADER[4],
+        METHOD_HEADER[5]
+    );
+    for l in lines {
+        let _ = writeln!(
+            s,
+            "  {:<w$}  {:>5}  {:>6}  {:>14}  {:>16}  {:>11}",
+            l.method,
+            l.runs,
+            l.failed,
+            fmt_stat(l.e_align),
+            fmt_stat(l.e_r),
+            fmt_stat(l.e_s_prime)
+        );
+    }
+    s
+}
+
+/// Checks the demo's folder before any work: it must not exist, or (with --force) have been
+/// written by an earlier demo, or be empty.
+fn check_target(target: &Path, force: bool) -> Result<()> {
+    OutputDir::check(target, force)?;
+    if target.exists() {
+        let earlier_demo = target.join(MARKER).is_file();
+        let empty = std::fs::read_dir(target)
+            .map(|mut d| d.next().is_none())
+            .unwrap_or(false);
+        if !earlier_demo && !empty {
+            bail!(
+                "{}: exists and was not written by `monovo demo`; refusing to replace it even with --force (choose another folder with -o)",
+                target.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Runs `monovo demo`.
 pub fn run(args: &Args) -> Result<()> {
     let started = Instant::now();
     let target = &args.output;
-    let replace = target.join(MARKER).is_file();
-    if target.exists() && !replace {
-        bail!(
-            "{}: exists and was not written by `monovo demo`; choose another folder with -o",
-            target.display()
-        );
-    }
-    let out = OutputDir::create(target, replace)?;
-    std::fs::write(out.path().join(MARKER), "written by monovo demo\n")
-        .with_context(|| out.path().display().to_string())?;
+    check_target(target, args.force)?;
+    let quiet = args.json;
+    let out = OutputDir::create(target, args.force)?;
+    out.write(MARKER, b"written by monovo demo\n")?;
     let dir = out.path().to_path_buf();
     let mut md = String::new();
     let _ = writeln!(md, "# monovo demo (seed {})\n", args.seed);
 
     // 1. sequence
     step(
+        quiet,
         1,
         "rendering a benchmark-like sequence (640x512, 200 frames, FOV camera)",
-    );
+    )?;
     let seq_out = OutputDir::create(&dir.join("sequence"), false)?;
     let seq_args = synth::SequenceArgs {
         output: dir.join("sequence"),
@@ -174,9 +265,10 @@ pub fn run(args: &Args) -> Result<()> {
 
     // 2. response calibration
     step(
+        quiet,
         2,
         "calibrating the response from a synthetic exposure sweep",
-    );
+    )?;
     let sweep_out = OutputDir::create(&dir.join("sweep"), false)?;
     let sweep_args = synth::SweepArgs {
         output: dir.join("sweep"),
@@ -208,10 +300,12 @@ pub fn run(args: &Args) -> Result<()> {
     )?;
     calib::response_figure(&cal, Some(&sweep.response), &dir.join("response.png"))?;
     let (max_err, _) = cal.response.errors_against(&sweep.response);
-    println!(
-        "      {} iterations, max |U - U_true| = {max_err:.3} grey levels, {cal_secs:.1} s",
-        cal.iterations
-    );
+    if !quiet {
+        outln!(
+            "      {} iterations, max |U - U_true| = {max_err:.3} grey levels, {cal_secs:.1} s",
+            cal.iterations
+        )?;
+    }
     let _ = writeln!(
         md,
         "## Response calibration\n\n60 exposures of a static scene (640x512, 0.05 to 20 ms, typical sensor noise, JPEG 90): converged in {} iterations \
@@ -221,9 +315,10 @@ pub fn run(args: &Args) -> Result<()> {
 
     // 3. vignette calibration
     step(
+        quiet,
         3,
         "calibrating the vignette from a marker-plane video (ArUco 213, 640x512, 100 frames)",
-    );
+    )?;
     let vig_out = OutputDir::create(&dir.join("wall"), false)?;
     let vig_args = synth::VignetteArgs {
         output: dir.join("wall"),
@@ -251,6 +346,7 @@ pub fn run(args: &Args) -> Result<()> {
         json: true,
     })?;
     let vig_secs = t.elapsed().as_secs_f64();
+    let vig_smoothing = run.cal.smoothing.sigma_px;
     let (vig_rms, _) = photometric::vignette_errors(run.cal.vignette.data(), &wall.vignette);
     let (raw_rms, vig_valid) = photometric::vignette_errors(run.cal.raw.data(), &wall.vignette);
     let v16: Vec<u16> = run
@@ -269,12 +365,14 @@ pub fn run(args: &Args) -> Result<()> {
         dataset_io::PngSpeed::Default,
     )?;
     calib::vignette_figure(&run.cal, Some(&wall.vignette), &dir.join("vignette.png"))?;
-    println!(
-        "      RMS relative error of V: {:.3}% (raw map {:.3}%), smoothing {:.1} px chosen by cross-validation ({vig_secs:.1} s)",
-        vig_rms * 100.0,
-        raw_rms * 100.0,
-        run.cal.smoothing.sigma_px
-    );
+    if !quiet {
+        outln!(
+            "      RMS relative error of V: {:.3}% (raw map {:.3}%), smoothing {:.1} px chosen by cross-validation ({vig_secs:.1} s)",
+            vig_rms * 100.0,
+            raw_rms * 100.0,
+            run.cal.smoothing.sigma_px
+        )?;
+    }
     let _ = writeln!(
         md,
         "## Vignette calibration\n\n100 frames of a bright wall with ArUco marker 213 (poses from the detected marker, {} used): \
@@ -289,13 +387,14 @@ pub fn run(args: &Args) -> Result<()> {
 
     // 4. rectification and photometric correction
     step(
+        quiet,
         4,
         "rectifying the sequence to a 640x480 pinhole and undoing response and vignette",
-    );
+    )?;
     let rect_args = rectify::Args {
         sequence: dir.join("sequence"),
         output: dir.join("rectified"),
-        camera: None,
+        pinhole: None,
         size: Some(ImageSize::new(640, 480)),
         photometric: true,
         irradiance: false,
@@ -308,7 +407,19 @@ pub fn run(args: &Args) -> Result<()> {
         force: false,
         json: false,
     };
-    rectify::run(&rect_args)?;
+    let rectified = rectify::run(&rect_args)?;
+    if !quiet {
+        outln!(
+            "      {} frames to fx={:.1} fy={:.1} cx={:.1} cy={:.1} in {:.1} s ({:.0} frames/s)",
+            rectified.frames,
+            rectified.fx,
+            rectified.fy,
+            rectified.cx,
+            rectified.cy,
+            rectified.seconds,
+            rectified.frames as f64 / rectified.seconds.max(1e-9)
+        )?;
+    }
     let rect = Sequence::open(&dir.join("rectified"))?;
     let k = rect
         .camera()
@@ -345,9 +456,10 @@ pub fn run(args: &Args) -> Result<()> {
 
     // 5. results of two methods, evaluated
     step(
+        quiet,
         5,
         "generating and evaluating 1000 runs of two synthetic VO methods",
-    );
+    )?;
     let res_out = OutputDir::create(&dir.join("benchmark"), false)?;
     let res_args = synth::ResultsArgs {
         output: dir.join("benchmark"),
@@ -360,22 +472,26 @@ pub fn run(args: &Args) -> Result<()> {
     synth::write_results(&res_out, &res_args)?;
     res_out.commit()?;
     let csv = dir.join("results.csv");
-    let t = Instant::now();
-    eval_batch::run(&eval_batch::Args {
+    let batch = eval_batch::evaluate_tree(&eval_batch::Args {
         dataset: dir.join("benchmark/dataset"),
         results: dir.join("benchmark/results"),
         output: csv.clone(),
+        force: false,
         keep_going: false,
         json: false,
     })?;
-    let eval_secs = t.elapsed().as_secs_f64();
-    let records = parse_csv(&dataset_io::read_text(&csv)?)?;
+    let eval_secs = batch.seconds;
+    let records = batch.records;
+    if !quiet {
+        outln!("      {} runs evaluated in {eval_secs:.2} s", records.len())?;
+    }
 
     // 6. plots
     step(
+        quiet,
         6,
         "plotting: cumulative errors, metric study, alignment figure",
-    );
+    )?;
     for (metric, file, split) in [
         (
             Metric::EAlign,
@@ -401,7 +517,8 @@ pub fn run(args: &Args) -> Result<()> {
     dataset_io::write_atomic(&dir.join("table.md"), table.as_bytes())?;
 
     // 7. summary
-    step(7, "writing summary.md");
+    step(quiet, 7, "writing summary.md")?;
+    let lines = method_lines(&records);
     let _ = writeln!(
         md,
         "## Evaluation\n\n{} runs (2 methods x 50 sequences x fwd/bwd x 5 runs) evaluated in {eval_secs:.2} s.\n\n{}\n\
@@ -409,19 +526,70 @@ pub fn run(args: &Args) -> Result<()> {
          The paper's metric study on one synthetic sequence: e_align depends much less on where the drift happens than e_t and e_rmse.\n\n\
          ![metric study](metric_study.png)\n\n![alignment](alignment.png)\n\nPer-sequence table: [table.md](table.md).\n",
         records.len(),
-        method_summary(&records)
+        method_markdown(&lines)
     );
-    let _ = writeln!(
-        md,
-        "Total demo time: {:.1} s.",
-        started.elapsed().as_secs_f64()
-    );
+    let total = started.elapsed().as_secs_f64();
+    let _ = writeln!(md, "Total demo time: {total:.1} s.");
     dataset_io::write_atomic(&dir.join("summary.md"), md.as_bytes())?;
     let final_dir = out.commit()?;
-    println!();
-    println!("{}", std::fs::read_to_string(final_dir.join("summary.md"))?);
-    println!("everything is in {}", final_dir.display());
+    let files: Vec<(&str, &str)> = vec![
+        ("summary.md", "the report, with every figure"),
+        ("table.md", "the paper's per-sequence table"),
+        ("results.csv", "1000 evaluated runs"),
+        ("cumulative_e_align.png", "cumulative plots (also e_r, e_s)"),
+        ("metric_study.png", "where drift happens vs. the metrics"),
+        ("alignment.png", "start- and end-aligned trajectory"),
+        ("response.png", "calibrated response vs. truth"),
+        ("vignette.png", "calibrated vignette vs. truth"),
+        ("frame_raw.png", "a raw frame (and frame_rectified.png)"),
+        (
+            "sequence/",
+            "the synthetic sequence (rectified/: corrected)",
+        ),
+    ];
+    if args.json {
+        outln!(
+            "{}",
+            serde_json::json!({
+                "output": final_dir.display().to_string(),
+                "seconds": total,
+                "seed": args.seed,
+                "response": {"iterations": cal.iterations, "max_error_grey": max_err, "seconds": cal_secs},
+                "vignette": {"rms_relative_error": vig_rms, "raw_rms_relative_error": raw_rms, "smoothing_px": vig_smoothing, "seconds": vig_secs},
+                "rectified": rectified,
+                "evaluation": {
+                    "runs": records.len(),
+                    "seconds": eval_secs,
+                    "methods": lines.iter().map(|l| serde_json::json!({
+                        "method": l.method, "runs": l.runs, "failed": l.failed,
+                        "median_e_align": num(l.e_align), "median_e_r": num(l.e_r), "median_e_s_prime": num(l.e_s_prime),
+                    })).collect::<Vec<_>>(),
+                },
+                "files": files.iter().map(|(f, _)| final_dir.join(f).display().to_string()).collect::<Vec<_>>(),
+            })
+        )?;
+        return Ok(());
+    }
+    outln!()?;
+    outln!("{}", method_text(&lines))?;
+    outln!("wrote {} in {total:.0} s:", final_dir.display())?;
+    let shown: Vec<(String, &str)> = files
+        .iter()
+        .map(|(f, what)| (final_dir.join(f).display().to_string(), *what))
+        .collect();
+    let w = shown.iter().map(|(f, _)| f.len()).max().unwrap_or(0);
+    for (f, what) in &shown {
+        outln!("  {f:<w$}  {what}")?;
+    }
     Ok(())
+}
+
+fn num(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::Value::Null
+    }
 }
 
 /// The demo's synthetic sensor: typical noise, the default response, JPEG 90 (or PNG).

@@ -60,11 +60,14 @@ pub struct Args {
     /// Draw the paper's alignment figure (top-down; .png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// Replace an existing --plot file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Reads and parses a trajectory file in `format` (KITTI needs `times`).
 pub fn load_trajectory(path: &Path, format: FormatArg, times: Option<&Path>) -> Result<Trajectory> {
-    let text = dataset_io::read_text(path)?;
+    let text = dataset_io::read_text(path).context("the trajectory")?;
     let fmt = match format {
         FormatArg::Auto => detect_format(&text),
         FormatArg::Tum => TrajectoryFormat::Tum,
@@ -81,17 +84,17 @@ pub fn load_trajectory(path: &Path, format: FormatArg, times: Option<&Path>) -> 
                     path.display()
                 );
             };
-            let tt = dataset_io::read_text(tp)?;
+            let tt = dataset_io::read_text(tp).context("the --times file")?;
             parse_kitti(&text, &tt)
         }
     };
-    traj.with_context(|| path.display().to_string())
+    traj.with_context(|| format!("the trajectory {}", path.display()))
 }
 
 /// Reads groundtruthSync.txt.
 pub fn load_ground_truth(path: &Path) -> Result<GroundTruth> {
-    let text = dataset_io::read_text(path)?;
-    GroundTruth::parse(&text).with_context(|| path.display().to_string())
+    let text = dataset_io::read_text(path).context("the ground truth")?;
+    GroundTruth::parse(&text).with_context(|| format!("the ground truth {}", path.display()))
 }
 
 /// `None` for an infinite or NaN metric (JSON `null`).
@@ -160,6 +163,7 @@ fn fmt(v: f64, digits: usize) -> String {
 pub fn run(args: &Args) -> Result<()> {
     if let Some(p) = &args.plot {
         plot::format_of(p)?;
+        dataset_io::check_output_file(p, args.force)?;
     }
     let gt = load_ground_truth(&args.gt)?;
     let traj = load_trajectory(&args.trajectory, args.format, args.times.as_deref())?;
@@ -168,12 +172,12 @@ pub fn run(args: &Args) -> Result<()> {
         alignment_figure(&e, &gt, p)?;
     }
     if args.json {
-        println!("{}", serde_json::to_string(&EvaluationJson::from(&e))?);
+        outln!("{}", serde_json::to_string(&EvaluationJson::from(&e))?)?;
         return Ok(());
     }
     let m = &e.metrics;
-    println!("run:        {}", args.trajectory.display());
-    println!(
+    outln!("run:        {}", args.trajectory.display())?;
+    outln!(
         "poses:      {} ({} in the start segment, {} in the end segment{})",
         e.poses,
         e.poses_start,
@@ -183,27 +187,27 @@ pub fn run(args: &Args) -> Result<()> {
         } else {
             ""
         }
-    );
+    )?;
     match &e.failure {
-        None => println!("status:     ok"),
-        Some(r) => println!("status:     FAILED: {r}"),
+        None => outln!("status:     ok")?,
+        Some(r) => outln!("status:     FAILED: {r}")?,
     }
-    println!("e_align:    {}", fmt(m.e_align, 4));
-    println!(
+    outln!("e_align:    {}", fmt(m.e_align, 4))?;
+    outln!(
         "e_s:        {}   (e'_s = max(e_s, 1/e_s) = {})",
         fmt(m.e_s, 4),
         fmt(m.e_s_sym(), 4)
-    );
-    println!("e_r:        {} deg", fmt(m.e_r, 4));
-    println!("e_t:        {}", fmt(m.e_t, 4));
-    println!("e_rmse:     {}", fmt(m.e_rmse, 4));
-    println!(
+    )?;
+    outln!("e_r:        {} deg", fmt(m.e_r, 4))?;
+    outln!("e_t:        {}", fmt(m.e_t, 4))?;
+    outln!("e_rmse:     {}", fmt(m.e_rmse, 4))?;
+    outln!(
         "rmse_start: {}   rmse_end: {}",
         fmt(m.rmse_start, 5),
         fmt(m.rmse_end, 5)
-    );
+    )?;
     if let Some(p) = &args.plot {
-        println!("plot:       {}", p.display());
+        outln!("plot:       {}", p.display())?;
     }
     Ok(())
 }

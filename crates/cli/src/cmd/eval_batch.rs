@@ -35,9 +35,12 @@ pub struct Args {
     /// Folder with METHOD/SEQUENCE/{fwd,bwd}_N.txt trajectories (TUM or EuRoC format).
     #[arg(long, value_name = "RESULTS")]
     pub results: PathBuf,
-    /// The results.csv to write.
+    /// The results.csv to write (must not exist unless --force).
     #[arg(short, long, value_name = "CSV")]
     pub output: PathBuf,
+    /// Replace an existing results.csv.
+    #[arg(long)]
+    pub force: bool,
     /// Record unreadable or malformed run files as failed runs instead of stopping.
     #[arg(long)]
     pub keep_going: bool,
@@ -70,10 +73,32 @@ struct BatchJson {
     sequences: usize,
     stray: Vec<StrayJson>,
     output: String,
+    /// Wall time in seconds.
+    seconds: f64,
 }
 
-/// Runs `monovo eval-batch`.
-pub fn run(args: &Args) -> Result<()> {
+/// What `monovo eval-batch` wrote.
+pub struct Batch {
+    /// The evaluated runs, as written to results.csv.
+    pub records: Vec<eval_metrics::RunRecord>,
+    /// Runs that could not be read (counted as failed with --keep-going).
+    pub unreadable: usize,
+    /// Files skipped, with the reason.
+    pub stray: Vec<(PathBuf, String)>,
+    /// Number of sequences with a ground truth.
+    pub sequences: usize,
+    /// The results.csv written.
+    pub output: PathBuf,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+/// Evaluates a results tree into results.csv; warnings (skipped files) go to stderr,
+/// nothing to stdout.
+pub fn evaluate_tree(args: &Args) -> Result<Batch> {
+    let started = std::time::Instant::now();
+    // the output location first: no work for an output that cannot be written
+    dataset_io::check_output_file(&args.output, args.force)?;
     let gts = scan_ground_truths(&args.dataset)?;
     let tree = scan_results(&args.results)?;
     let loaded: Vec<Result<(String, GroundTruth)>> = gts
@@ -105,7 +130,7 @@ pub fn run(args: &Args) -> Result<()> {
         })
         .collect();
     for (p, why) in &stray {
-        eprintln!("monovo: skipping {}: {why}", p.display());
+        crate::warn(format_args!("skipping {}: {why}", p.display()));
     }
     if runs.is_empty() {
         bail!(
@@ -114,7 +139,7 @@ pub fn run(args: &Args) -> Result<()> {
             args.dataset.display()
         );
     }
-    let pb = progress::bar(runs.len() as u64, "evaluating");
+    let pb = progress::bar(runs.len() as u64, "evaluating", "runs");
     let key = |r: &&RunFile| RunKey {
         method: r.method.clone(),
         sequence: r.sequence.clone(),
@@ -140,7 +165,7 @@ pub fn run(args: &Args) -> Result<()> {
             Ok(rec) => records.push(rec),
             Err(e) if args.keep_going => {
                 unreadable += 1;
-                eprintln!("monovo: counting as failed: {e:#}");
+                crate::warn(format_args!("counting as failed: {e:#}"));
                 records.push(eval_metrics::RunRecord {
                     key: key(file),
                     failure: Some(format!("{e:#}")),
@@ -152,6 +177,26 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     dataset_io::write_atomic(&args.output, write_csv(&records).as_bytes())?;
+    Ok(Batch {
+        records,
+        unreadable,
+        stray,
+        sequences: ground_truth.len(),
+        output: args.output.clone(),
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs `monovo eval-batch`.
+pub fn run(args: &Args) -> Result<()> {
+    let Batch {
+        records,
+        unreadable,
+        stray,
+        sequences,
+        output,
+        seconds,
+    } = evaluate_tree(args)?;
     let mut per_method: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
     for r in &records {
         let e = per_method.entry(r.key.method.as_str()).or_default();
@@ -170,7 +215,7 @@ pub fn run(args: &Args) -> Result<()> {
                 .iter()
                 .map(|(m, &(runs, failed))| (m.to_string(), MethodJson { runs, failed }))
                 .collect(),
-            sequences: ground_truth.len(),
+            sequences,
             stray: stray
                 .iter()
                 .map(|(p, why)| StrayJson {
@@ -178,26 +223,27 @@ pub fn run(args: &Args) -> Result<()> {
                     reason: why.clone(),
                 })
                 .collect(),
-            output: args.output.display().to_string(),
+            output: output.display().to_string(),
+            seconds,
         };
-        println!("{}", serde_json::to_string(&summary)?);
+        outln!("{}", serde_json::to_string(&summary)?)?;
     } else {
-        println!(
-            "evaluated {} runs of {} method(s) on {} sequence(s): {} failed{}",
+        outln!(
+            "evaluated {} runs of {} method(s) on {} sequence(s) in {seconds:.2} s: {} failed{}",
             records.len(),
             per_method.len(),
-            ground_truth.len(),
+            sequences,
             failed,
             if stray.is_empty() {
                 String::new()
             } else {
                 format!(", {} stray file(s) skipped", stray.len())
             }
-        );
+        )?;
         for (m, (n, f)) in &per_method {
-            println!("  {m:<20} {n:>6} runs  {f:>5} failed");
+            outln!("  {m:<20} {n:>6} runs  {f:>5} failed")?;
         }
-        println!("wrote {}", args.output.display());
+        outln!("wrote {}", output.display())?;
     }
     Ok(())
 }

@@ -279,7 +279,7 @@ fn measure(
 ) -> Result<Ratios> {
     let start = Instant::now();
     let n = seq.len();
-    let pb = progress::bar(n as u64, "measuring");
+    let pb = progress::bar(n as u64, "measuring", "frames");
     let chunk = (rayon::current_num_threads() * 4).max(8);
     let mut consecutive = vec![None; n.saturating_sub(1)];
     let mut skipped = vec![None; if skip { n.saturating_sub(2) } else { 0 }];

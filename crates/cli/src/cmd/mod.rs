@@ -1,4 +1,4 @@
-//! One module per subcommand.
+//! One module per subcommand, and what several of them share.
 
 pub mod calib;
 pub mod camera;
@@ -10,3 +10,36 @@ pub mod info;
 pub mod plot;
 pub mod rectify;
 pub mod synth;
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use camera_model::ImageSize;
+use dataset_io::Sequence;
+use photometric::Vignette;
+
+/// Opens and validates a sequence folder and prints what times.txt's reading repaired or
+/// could not (interpolated zero exposures, unknown exposures, ids that do not name the
+/// images) as warnings.
+pub fn open_sequence(dir: &Path) -> Result<Sequence> {
+    let seq = Sequence::open(dir)?;
+    for w in &seq.times().warnings {
+        crate::warn(format_args!("{w}"));
+    }
+    Ok(seq)
+}
+
+/// Reads vignette.png as rectify uses it: 8- or 16-bit grey, a valid map, at the size of
+/// the images.
+pub fn read_vignette(path: &Path, images: ImageSize) -> Result<Vignette> {
+    let (img, _) = dataset_io::read_gray_map(path)?;
+    let v = Vignette::from_u16(&img).with_context(|| path.display().to_string())?;
+    let (w, h) = v.size();
+    if (w, h) != (images.width, images.height) {
+        bail!(
+            "{}: the vignette is {w}x{h} but the images are {images}",
+            path.display()
+        );
+    }
+    Ok(v)
+}

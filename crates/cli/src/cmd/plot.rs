@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use eval_metrics::{
-    cumulative, markdown_table, parse_csv, summarize, DirectionFilter, Metric, RunRecord,
+    cumulative, parse_csv, summarize, summary_table, DirectionFilter, Metric, RunRecord, TableStyle,
 };
 
 use crate::plot::{self, Chart, Corner, Figure, Series, PALETTE};
@@ -29,7 +29,16 @@ One line per method (and per direction with --split direction) over all its runs
 runs never reach the curve, so a method's robustness shows as its final height. The x axis is
 logarithmic, as in the paper. e_s is summarised as e'_s = max(e_s, 1/e_s).")]
     Cumulative(CumulativeArgs),
-    /// Per-sequence median (min-max) of e_align, e_r and e_s over runs, as a markdown table.
+    /// Per-sequence median (min-max) over the runs of e_align, e_r (degrees) and
+    /// e'_s = max(e_s, 1/e_s) (a multiplier), as the paper's table.
+    #[command(after_help = "\
+Examples:
+  monovo plot table results.csv                 # aligned text for the terminal
+  monovo plot table results.csv -o table.md     # a markdown table (.md), text otherwise
+  monovo plot table results.csv --json          # one JSON object, null = infinite
+
+One row per sequence and method (and direction with --split direction). Failed runs count as
+infinite, so a median of inf means that half the runs or more failed.")]
     Table(TableArgs),
 }
 
@@ -66,6 +75,12 @@ pub struct CumulativeArgs {
     /// Only forwards or only backwards runs.
     #[arg(long, value_enum, conflicts_with = "split")]
     pub direction: Option<Dir>,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print one JSON object (the curves: per line its sorted finite values and its runs).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `monovo plot table`.
@@ -76,14 +91,50 @@ pub struct TableArgs {
     /// Separate rows for forwards and backwards runs.
     #[arg(long, value_enum)]
     pub split: Option<Split>,
-    /// Write the table to this file instead of standard output.
+    /// Write the table to this file instead of standard output (markdown for .md, aligned
+    /// text otherwise).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
+    /// A markdown table instead of aligned text.
+    #[arg(long)]
+    pub markdown: bool,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print one JSON object with the summaries (null = infinite) instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn load(path: &Path) -> Result<Vec<RunRecord>> {
-    let text = dataset_io::read_text(path)?;
+    let text = dataset_io::read_text(path).context("the results")?;
     parse_csv(&text).with_context(|| path.display().to_string())
+}
+
+fn num(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+/// The summaries as one JSON object.
+fn table_json(summaries: &[eval_metrics::SequenceSummary]) -> serde_json::Value {
+    let stat = |s: &eval_metrics::Stat| serde_json::json!({"median": num(s.median), "min": num(s.min), "max": num(s.max)});
+    serde_json::json!({
+        "caption": eval_metrics::TABLE_CAPTION,
+        "rows": summaries.iter().map(|s| serde_json::json!({
+            "sequence": s.sequence,
+            "method": s.method,
+            "direction": s.direction.map(|d| d.to_string()),
+            "runs": s.runs,
+            "failed": s.failed,
+            "e_align": stat(&s.e_align),
+            "e_r_deg": stat(&s.e_r),
+            "e_s_prime": stat(&s.e_s_prime),
+        })).collect::<Vec<_>>(),
+    })
 }
 
 /// The step curve of a cumulative plot, extended to `x_max`.
@@ -160,6 +211,7 @@ pub fn run(args: &Args) -> Result<()> {
     match &args.what {
         What::Cumulative(a) => {
             plot::format_of(&a.output)?;
+            dataset_io::check_output_file(&a.output, a.force)?;
             let records = load(&a.results)?;
             let filter = match (a.split, a.direction) {
                 (Some(Split::Direction), _) => DirectionFilter::Split,
@@ -169,17 +221,51 @@ pub fn run(args: &Args) -> Result<()> {
             };
             let chart = cumulative_chart(&records, a.metric, filter);
             plot::save(&Figure::single(chart, 900, 600), &a.output)?;
-            println!("wrote {}", a.output.display());
+            if a.json {
+                let curves = cumulative(&records, a.metric, filter);
+                outln!(
+                    "{}",
+                    serde_json::json!({
+                        "output": a.output.display().to_string(),
+                        "metric": a.metric.name(),
+                        "lines": curves.iter().map(|c| serde_json::json!({
+                            "label": c.label, "runs": c.runs, "values": c.values,
+                        })).collect::<Vec<_>>(),
+                    })
+                )?;
+            } else {
+                outln!("wrote {}", a.output.display())?;
+            }
         }
         What::Table(a) => {
+            if let Some(p) = &a.output {
+                dataset_io::check_output_file(p, a.force)?;
+            }
             let records = load(&a.results)?;
-            let table = markdown_table(&summarize(&records, a.split.is_some()));
+            let summaries = summarize(&records, a.split.is_some());
+            let to_md = a.markdown
+                || a.output
+                    .as_ref()
+                    .is_some_and(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("md")));
+            let style = if to_md {
+                TableStyle::Markdown
+            } else {
+                TableStyle::Text
+            };
+            let table = summary_table(&summaries, style);
             match &a.output {
                 Some(p) => {
                     dataset_io::write_atomic(p, table.as_bytes())?;
-                    println!("wrote {}", p.display());
+                    if a.json {
+                        let mut v = table_json(&summaries);
+                        v["output"] = serde_json::json!(p.display().to_string());
+                        outln!("{v}")?;
+                    } else {
+                        outln!("wrote {}", p.display())?;
+                    }
                 }
-                None => print!("{table}"),
+                None if a.json => outln!("{}", table_json(&summaries))?,
+                None => out!("{table}")?,
             }
         }
     }

@@ -14,6 +14,9 @@ use crate::progress;
 pub struct Args {
     #[command(subcommand)]
     pub what: What,
+    /// Print one JSON object (what was written) instead of text.
+    #[arg(long, global = true)]
+    pub json: bool,
 }
 
 /// What to generate.
@@ -322,7 +325,7 @@ pub fn write_results(out: &OutputDir, a: &ResultsArgs) -> Result<usize> {
             }
         }
     }
-    let pb = progress::bar(jobs.len() as u64, "generating");
+    let pb = progress::bar(jobs.len() as u64, "generating", "runs");
     jobs.par_iter()
         .try_for_each(|&(mi, s, bwd, r)| -> Result<()> {
             let m = &cfg.methods[mi];
@@ -348,7 +351,7 @@ fn write_frames(
     ext: &str,
     render: impl Fn(usize) -> Result<Vec<u8>> + Sync,
 ) -> Result<()> {
-    let pb = progress::bar(frames as u64, "rendering");
+    let pb = progress::bar(frames as u64, "rendering", "frames");
     let encoded: Vec<Result<(String, Vec<u8>)>> = (0..frames)
         .into_par_iter()
         .map(|i| {
@@ -446,7 +449,9 @@ pub fn write_sequence(
         }
         dataset_io::write_atomic(&out.file("truth_shifts.txt")?, text.as_bytes())?;
     }
-    let out_size = ((w / 2).max(2), (h * 15 / 32).max(2));
+    // the dataset's output camera: 640x480 (4:3 at most 640 wide, as its camera.txt says)
+    let out_w = w.clamp(2, 640);
+    let out_size = (out_w, (out_w * 3 / 4).max(2));
     dataset_io::write_atomic(
         &out.file("camera.txt")?,
         seq.camera.camera_txt(out_size).as_bytes(),
@@ -527,55 +532,68 @@ pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::S
 
 /// Runs `monovo synth`.
 pub fn run(args: &Args) -> Result<()> {
-    match &args.what {
+    let (dir, text, json) = match &args.what {
         What::Sequence(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
             let seq = write_sequence(&out, a)?;
             let dir = out.commit()?;
-            println!(
-                "wrote a {}x{} sequence of {} frames to {}",
-                seq.config.width,
-                seq.config.height,
-                seq.config.frames,
-                dir.display()
-            );
+            let c = &seq.config;
+            (
+                dir,
+                format!("a {}x{} sequence of {} frames", c.width, c.height, c.frames),
+                serde_json::json!({"kind": "sequence", "width": c.width, "height": c.height, "frames": c.frames}),
+            )
         }
         What::Vignette(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
             let seq = write_vignette_set(&out, a)?;
             let dir = out.commit()?;
-            println!(
-                "wrote a {}x{} marker-plane set of {} frames to {}",
-                seq.config.width,
-                seq.config.height,
-                seq.poses.len(),
-                dir.display()
-            );
+            let c = &seq.config;
+            (
+                dir,
+                format!(
+                    "a {}x{} marker-plane set of {} frames",
+                    c.width,
+                    c.height,
+                    seq.poses.len()
+                ),
+                serde_json::json!({"kind": "vignette", "width": c.width, "height": c.height, "frames": seq.poses.len()}),
+            )
         }
         What::Sweep(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
             let sw = write_sweep(&out, a)?;
             let dir = out.commit()?;
-            println!(
-                "wrote a {}x{} sweep of {} exposures ({:.3} to {:.3} ms) to {}",
-                sw.width,
-                sw.height,
-                sw.exposures_ms.len(),
-                sw.exposures_ms[0],
-                sw.exposures_ms[sw.exposures_ms.len() - 1],
-                dir.display()
-            );
+            let lo = sw.exposures_ms.first().copied().unwrap_or(0.0);
+            let hi = sw.exposures_ms.last().copied().unwrap_or(0.0);
+            (
+                dir,
+                format!(
+                    "a {}x{} sweep of {} exposures ({lo:.3} to {hi:.3} ms)",
+                    sw.width,
+                    sw.height,
+                    sw.exposures_ms.len(),
+                ),
+                serde_json::json!({"kind": "sweep", "width": sw.width, "height": sw.height, "frames": sw.exposures_ms.len(), "min_exposure_ms": lo, "max_exposure_ms": hi}),
+            )
         }
         What::Results(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
             let n = write_results(&out, a)?;
             let dir = out.commit()?;
-            println!(
-                "wrote {n} runs of 2 methods on {} sequences to {}",
-                a.sequences.max(1),
-                dir.display()
-            );
+            (
+                dir,
+                format!("{n} runs of 2 methods on {} sequences", a.sequences.max(1)),
+                serde_json::json!({"kind": "results", "runs": n, "methods": 2, "sequences": a.sequences.max(1)}),
+            )
         }
+    };
+    if args.json {
+        let mut v = json;
+        v["output"] = serde_json::json!(dir.display().to_string());
+        outln!("{v}")?;
+    } else {
+        outln!("wrote {text} to {}", dir.display())?;
     }
     Ok(())
 }
