@@ -796,7 +796,7 @@ pub fn calibrate_vignette(
     let mut warnings = Vec::new();
     let mut outside: Vec<bool> = Vec::new();
     if parts > 1 {
-        let (bw, bh) = (w.div_ceil(8), h.div_ceil(8));
+        let bw = w.div_ceil(8);
         let mut sizes = vec![0usize; parts];
         for &l in &labels {
             if l != u32::MAX {
@@ -823,7 +823,6 @@ pub fn calibrate_vignette(
                 labels[b] != big as u32
             })
             .collect();
-        let _ = bh;
         warnings.push(format!(
             "{:.1}% of the observed image is not connected to the rest (it sees no plane area that the rest sees); it is filled from its neighbourhood",
             100.0 * (1.0 - frac)
