@@ -42,6 +42,8 @@ enum Command {
     Eval(cmd::eval::Args),
     /// Score every run of a results tree in parallel into results.csv.
     EvalBatch(cmd::eval_batch::Args),
+    /// Evaluate methods and variations named in a TOML manifest into grouped plots and tables.
+    Experiment(cmd::experiment::Args),
     /// Draw the paper's cumulative error plots, or print its per-sequence table.
     Plot(cmd::plot::Args),
     /// Generate synthetic data with known ground truth (fixed seed).
@@ -83,6 +85,7 @@ fn main() -> ExitCode {
         Command::Exposure(args) => cmd::exposure::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),
+        Command::Experiment(args) => cmd::experiment::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),
         Command::Synth(args) => cmd::synth::run(&args),
     };

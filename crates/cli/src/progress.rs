@@ -59,3 +59,32 @@ pub fn spinner(what: &str) -> ProgressBar {
     }
     pb
 }
+
+/// The command's observer of library pipelines: warnings to stderr, stages as progress bars.
+#[derive(Default)]
+pub struct Bars(std::sync::Mutex<Option<ProgressBar>>);
+
+impl monovo_pipelines::Observer for Bars {
+    fn warn(&self, message: &str) {
+        crate::warn(format_args!("{message}"));
+    }
+    fn begin(&self, len: u64, what: &str, unit: &'static str) {
+        if let Ok(mut b) = self.0.lock() {
+            *b = Some(bar(len, what, unit));
+        }
+    }
+    fn advance(&self, n: u64) {
+        if let Ok(b) = self.0.lock() {
+            if let Some(b) = b.as_ref() {
+                b.inc(n);
+            }
+        }
+    }
+    fn finish(&self) {
+        if let Ok(mut b) = self.0.lock() {
+            if let Some(b) = b.take() {
+                b.finish_and_clear();
+            }
+        }
+    }
+}

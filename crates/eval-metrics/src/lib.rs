@@ -50,7 +50,7 @@ pub use batch::{
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
-pub use sim3::{align_sim3, rotation_angle, AlignFailure, Alignment, Sim3};
+pub use sim3::{align_sim3, principal_plane, rotation_angle, AlignFailure, Alignment, Sim3};
 pub use table::{markdown_table, summary_table, TableStyle, TABLE_CAPTION};
 pub use trajectory::{
     detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,

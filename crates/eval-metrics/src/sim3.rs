@@ -245,3 +245,24 @@ pub fn align_sim3(est: &[Vector3<f64>], gt: &[Vector3<f64>]) -> Result<Alignment
         rmse: (sq * inv_n).sqrt(),
     })
 }
+
+/// The two principal axes of a point set (unit vectors spanning the plane of largest
+/// spread, the first along the largest spread), from the eigen decomposition of the
+/// scatter matrix about the mean. Projecting on them gives a "top-down" view of a
+/// trajectory whatever the ground truth's up axis; their signs are arbitrary. Fewer than
+/// three points, or collinear ones, still give two orthonormal axes.
+pub fn principal_plane(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
+    let n = points.len().max(1) as f64;
+    let mean: Vector3<f64> = points.iter().sum::<Vector3<f64>>() / n;
+    let scatter: Matrix3<f64> = points
+        .iter()
+        .map(|p| (p - mean) * (p - mean).transpose())
+        .sum();
+    let eig = SymmetricEigen::new(scatter);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    (
+        eig.eigenvectors.column(order[0]).into_owned(),
+        eig.eigenvectors.column(order[1]).into_owned(),
+    )
+}

@@ -1,6 +1,6 @@
 //! Sim(3) alignment (Umeyama on nalgebra's SVD) and the Sim3 type.
 use eval_metrics::nalgebra::{Rotation3, Similarity3, Unit, Vector3};
-use eval_metrics::{align_sim3, rotation_angle, AlignFailure, Sim3};
+use eval_metrics::{align_sim3, principal_plane, rotation_angle, AlignFailure, Sim3};
 use proptest::prelude::*;
 
 fn v(a: [f64; 3]) -> Vector3<f64> {
@@ -175,4 +175,23 @@ fn sim3_serialises_with_serde() {
     let json = serde_json::to_string(&a).unwrap();
     let back: Sim3 = serde_json::from_str(&json).unwrap();
     assert_eq!(back, a);
+}
+
+/// The principal plane of points on a tilted ellipse: the axes are orthonormal, the first
+/// along the long axis, and both lie in the ellipse's plane.
+#[test]
+fn principal_plane_finds_the_plane_of_a_tilted_ellipse() {
+    let tilt = rot([1.0, 0.3, 0.0], 0.7);
+    let pts: Vec<Vector3<f64>> = (0..50)
+        .map(|i| {
+            let a = i as f64 / 50.0 * std::f64::consts::TAU;
+            tilt * v([5.0 * a.cos(), 2.0 * a.sin(), 0.0]) + v([1.0, 2.0, 3.0])
+        })
+        .collect();
+    let (ax, ay) = principal_plane(&pts);
+    let normal = tilt * v([0.0, 0.0, 1.0]);
+    assert!((ax.norm() - 1.0).abs() < 1e-12 && (ay.norm() - 1.0).abs() < 1e-12);
+    assert!(ax.dot(&ay).abs() < 1e-12);
+    assert!(ax.dot(&normal).abs() < 1e-9 && ay.dot(&normal).abs() < 1e-9);
+    assert!(ax.dot(&(tilt * v([1.0, 0.0, 0.0]))).abs() > 1.0 - 1e-9);
 }

@@ -2,11 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use camera_model::{
-    intrinsics_to_file_values, output_notes, CameraFile, CameraModel, ImageSize, OutputMode,
-    RectifyMap,
-};
+use anyhow::Result;
+use camera_model::{ImageSize, OutputMode};
+use monovo_pipelines::summarize_camera;
 
 /// Arguments of `monovo camera`.
 #[derive(clap::Args, Debug)]
@@ -42,86 +40,16 @@ pub struct Args {
     pub json: bool,
 }
 
-/// Horizontal and vertical field of view (degrees) of any model, measured between the rays
-/// through the outer edges of the image at the principal point's row and column.
-fn model_field_of_view(model: &CameraModel, size: ImageSize) -> Option<(f64, f64)> {
-    let k = model.intrinsics();
-    let angle = |px: [f64; 2], axis: usize| -> Option<f64> {
-        let r = model.unproject(px)?;
-        Some(r[axis].atan2(r[2]).abs())
-    };
-    let cx = k.cx.clamp(0.0, size.width as f64 - 1.0);
-    let cy = k.cy.clamp(0.0, size.height as f64 - 1.0);
-    let h = angle([-0.5, cy], 0)? + angle([size.width as f64 - 0.5, cy], 0)?;
-    let v = angle([cx, -0.5], 1)? + angle([cx, size.height as f64 - 0.5], 1)?;
-    Some((h.to_degrees(), v.to_degrees()))
-}
-
 /// Runs `monovo camera`.
 pub fn run(args: &Args) -> Result<()> {
-    let path = &args.camera_txt;
-    let text = dataset_io::read_text(path).context("the camera file")?;
-    let file = CameraFile::parse(&text).with_context(|| format!("{}", path.display()))?;
-    let mode = args.pinhole.unwrap_or(file.output);
-    let out_size = args.size.unwrap_or(file.output_size);
-    for w in
-        file.warnings
-            .iter()
-            .chain(&output_notes(&file.input, file.input_size, &mode, out_size))
-    {
-        crate::warn(format_args!("{}: {w}", path.display()));
-    }
-    let map = RectifyMap::for_mode(&file.input, file.input_size, &mode, out_size)
-        .with_context(|| format!("{}: output camera `{mode}` at {out_size}", path.display()))?;
-    let k = map.camera();
-    if mode == OutputMode::Crop && map.invalid_count() > 0 {
-        crate::warn(format_args!(
-            "{}: `crop` at {out_size} leaves {} output pixels without a source; a smaller --size or another --pinhole avoids them",
-            path.display(),
-            map.invalid_count()
-        ));
+    let summary = summarize_camera(&args.camera_txt, args.pinhole, args.size)?;
+    for w in &summary.warnings {
+        crate::warn(format_args!("{w}"));
     }
     if args.json {
-        let obj = serde_json::json!({
-            "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-            "width": out_size.width, "height": out_size.height,
-        });
-        outln!("{obj}")?;
-        return Ok(());
-    }
-    outln!("input:  {} ({})", file.input, file.input_size)?;
-    if let Some((h, v)) = model_field_of_view(&file.input, file.input_size) {
-        outln!("        field of view {h:.1} x {v:.1} degrees")?;
-    }
-    outln!(
-        "output: {mode} -> Pinhole fx={:.3} fy={:.3} cx={:.3} cy={:.3} ({out_size})",
-        k.fx,
-        k.fy,
-        k.cx,
-        k.cy
-    )?;
-    let (h, v) = k.field_of_view_deg(out_size.width, out_size.height);
-    outln!("        field of view {h:.1} x {v:.1} degrees")?;
-    let rel = intrinsics_to_file_values(&k, out_size);
-    outln!(
-        "        camera.txt line 3: {} {} {} {} 0",
-        rel[0],
-        rel[1],
-        rel[2],
-        rel[3]
-    )?;
-    let invalid = map.invalid_count();
-    outln!(
-        "        invalid (black) pixels: {invalid} ({:.2}%)",
-        100.0 * invalid as f64 / out_size.pixels() as f64
-    )?;
-    if !file.ignored_lines.is_empty() {
-        outln!("ignored (DSO reads only lines 1-4):")?;
-        for (no, line) in &file.ignored_lines {
-            let shown: String = line.chars().take(70).collect();
-            let more = if shown.len() < line.len() { "..." } else { "" };
-            outln!("        line {no}: {shown}{more}")?;
-        }
+        outln!("{}", summary.json())?;
+    } else {
+        out!("{}", summary.text())?;
     }
     Ok(())
 }

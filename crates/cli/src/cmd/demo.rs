@@ -7,15 +7,16 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use camera_model::{Image, ImageSize};
 use dataset_io::{OutputDir, Sequence};
-use eval_metrics::{
-    cumulative, evaluate, summarize, DirectionFilter, GroundTruth, Metric, RunRecord,
-};
-use synthetic::trajectory::{
-    benchmark_path, estimate, tum_text, Drift, EstimateConfig, PathConfig,
+use eval_metrics::{evaluate, summarize, DirectionFilter, Metric};
+use monovo_pipelines::paper::{medians_json, medians_markdown, medians_text};
+use monovo_pipelines::{
+    cumulative_chart, evaluate_tree, load_ground_truth, load_trajectory, method_medians,
+    metric_study_figure, save_alignment_figure, BatchOptions,
 };
 
-use crate::cmd::{calib, eval, eval_batch, plot as plotcmd, rectify, synth};
-use crate::plot::{self, Chart, Corner, Figure, Series, PALETTE};
+use crate::cmd::{calib, rectify, synth};
+use crate::plot::{self, Figure};
+use crate::progress::Bars;
 
 /// Marks a folder as written by `monovo demo`, so that a later demo may replace it.
 const MARKER: &str = ".monovo-demo";
@@ -52,165 +53,6 @@ fn step(quiet: bool, n: usize, what: &str) -> Result<()> {
         outln!("[{n}/7] {what}")?;
     }
     Ok(())
-}
-
-/// The paper's metric study: a x0.8 scale jump or a 10 degree rotation jump injected at each
-/// point in time; e_align, e_t and e_rmse against where the jump happens.
-fn metric_study(seed: u64, path: &Path) -> Result<()> {
-    let p = benchmark_path(
-        seed,
-        &PathConfig {
-            frames: 1000,
-            ..PathConfig::default()
-        },
-    );
-    let gt = GroundTruth::parse(&p.ground_truth_sync())?;
-    let mut lines: Vec<(String, Vec<[f64; 2]>, usize, bool)> = Vec::new();
-    for (jump, dashed) in [("scale x0.8", true), ("rotation 10 deg", false)] {
-        let mut ea = Vec::new();
-        let mut et = Vec::new();
-        let mut er = Vec::new();
-        for f in (p.segment_frames..p.len() - p.segment_frames).step_by(10) {
-            let drift = if dashed {
-                Drift {
-                    scale_jumps: vec![(f, 0.8)],
-                    ..Drift::default()
-                }
-            } else {
-                Drift {
-                    rotation_jumps: vec![(f, [0.2, 0.3, 1.0], 10.0)],
-                    ..Drift::default()
-                }
-            };
-            let cfg = EstimateConfig {
-                drift,
-                ..EstimateConfig::default()
-            };
-            let run = eval_metrics::parse_tum(&tum_text(&estimate(&p, &cfg, seed)))?;
-            let e = evaluate(&run, &gt);
-            let x = f as f64 / p.len() as f64;
-            ea.push([x, e.metrics.e_align]);
-            et.push([x, e.metrics.e_t]);
-            er.push([x, e.metrics.e_rmse]);
-        }
-        lines.push((format!("e_align, {jump}"), ea, 0, dashed));
-        lines.push((format!("e_t, {jump}"), et, 1, dashed));
-        lines.push((format!("e_rmse, {jump}"), er, 2, dashed));
-    }
-    let mut c = Chart::new(
-        "metric study: where the drift happens (dashed: scale x0.8, solid: rotation 10 deg)",
-        "time of the jump (fraction of the sequence)",
-        "error (ground-truth length unit)",
-    );
-    c.legend = Some(Corner::TopRight);
-    c.x_range = Some([0.0, 1.0]);
-    for (label, pts, color, dashed) in lines {
-        let mut s = Series::line(label, pts, PALETTE[color]);
-        if dashed {
-            s = s.dashed();
-        }
-        c.series.push(s);
-    }
-    plot::save(&Figure::single(c, 1000, 600), path)
-}
-
-fn fmt_stat(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.3}")
-    } else {
-        "inf".into()
-    }
-}
-
-/// One method's line of the demo's summary.
-struct MethodLine {
-    method: String,
-    runs: usize,
-    failed: usize,
-    e_align: f64,
-    e_r: f64,
-    e_s_prime: f64,
-}
-
-fn method_lines(records: &[RunRecord]) -> Vec<MethodLine> {
-    cumulative(records, Metric::EAlign, DirectionFilter::Both)
-        .into_iter()
-        .map(|c| {
-            let rs: Vec<&RunRecord> = records.iter().filter(|r| r.key.method == c.label).collect();
-            let med = |m: Metric| {
-                let v: Vec<f64> = rs.iter().map(|r| m.value(&r.metrics)).collect();
-                eval_metrics::Stat::of(&v).map_or(f64::NAN, |s| s.median)
-            };
-            MethodLine {
-                runs: c.runs,
-                failed: c.runs - c.values.len(),
-                e_align: med(Metric::EAlign),
-                e_r: med(Metric::ER),
-                e_s_prime: med(Metric::ES),
-                method: c.label,
-            }
-        })
-        .collect()
-}
-
-const METHOD_HEADER: [&str; 6] = [
-    "method",
-    "runs",
-    "failed",
-    "median e_align",
-    "median e_r (deg)",
-    "median e'_s",
-];
-
-fn method_markdown(lines: &[MethodLine]) -> String {
-    let mut s = format!(
-        "| {} |\n|---|--:|--:|--:|--:|--:|\n",
-        METHOD_HEADER.join(" | ")
-    );
-    for l in lines {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {} |",
-            l.method,
-            l.runs,
-            l.failed,
-            fmt_stat(l.e_align),
-            fmt_stat(l.e_r),
-            fmt_stat(l.e_s_prime)
-        );
-    }
-    s
-}
-
-fn method_text(lines: &[MethodLine]) -> String {
-    let w = lines
-        .iter()
-        .map(|l| l.method.len())
-        .max()
-        .unwrap_or(0)
-        .max(6);
-    let mut s = format!(
-        "  {:<w$}  {:>5}  {:>6}  {:>14}  {:>16}  {:>11}\n",
-        METHOD_HEADER[0],
-        METHOD_HEADER[1],
-        METHOD_HEADER[2],
-        METHOD_HEADER[3],
-        METHOD_HEADER[4],
-        METHOD_HEADER[5]
-    );
-    for l in lines {
-        let _ = writeln!(
-            s,
-            "  {:<w$}  {:>5}  {:>6}  {:>14}  {:>16}  {:>11}",
-            l.method,
-            l.runs,
-            l.failed,
-            fmt_stat(l.e_align),
-            fmt_stat(l.e_r),
-            fmt_stat(l.e_s_prime)
-        );
-    }
-    s
 }
 
 /// Checks the demo's folder before any work: it must not exist, or (with --force) have been
@@ -472,14 +314,16 @@ pub fn run(args: &Args) -> Result<()> {
     synth::write_results(&res_out, &res_args)?;
     res_out.commit()?;
     let csv = dir.join("results.csv");
-    let batch = eval_batch::evaluate_tree(&eval_batch::Args {
-        dataset: dir.join("benchmark/dataset"),
-        results: dir.join("benchmark/results"),
-        output: csv.clone(),
-        force: false,
-        keep_going: false,
-        json: false,
-    })?;
+    let batch = evaluate_tree(
+        &BatchOptions {
+            dataset: dir.join("benchmark/dataset"),
+            results: dir.join("benchmark/results"),
+            output: Some(csv),
+            force: false,
+            keep_going: false,
+        },
+        &Bars::default(),
+    )?;
     let eval_secs = batch.seconds;
     let records = batch.records;
     if !quiet {
@@ -501,24 +345,27 @@ pub fn run(args: &Args) -> Result<()> {
         (Metric::ER, "cumulative_e_r.png", DirectionFilter::Both),
         (Metric::ES, "cumulative_e_s.png", DirectionFilter::Split),
     ] {
-        let chart = plotcmd::cumulative_chart(&records, metric, split);
+        let chart = cumulative_chart(&records, metric, split);
         plot::save(&Figure::single(chart, 900, 600), &dir.join(file))?;
     }
-    metric_study(args.seed, &dir.join("metric_study.png"))?;
+    plot::save(
+        &metric_study_figure(args.seed)?,
+        &dir.join("metric_study.png"),
+    )?;
     let gt_path = dir.join("benchmark/dataset/sequence_01/groundtruthSync.txt");
-    let gt = eval::load_ground_truth(&gt_path)?;
+    let gt = load_ground_truth(&gt_path)?;
     let run_path = dir.join("benchmark/results/feature/sequence_01/fwd_0.txt");
-    let run = eval::load_trajectory(&run_path, eval::FormatArg::Auto, None)?;
+    let run = load_trajectory(&run_path, None, None)?;
     let ev = evaluate(&run, &gt);
     if ev.is_ok() {
-        eval::alignment_figure(&ev, &gt, &dir.join("alignment.png"))?;
+        save_alignment_figure(&ev, &gt, &dir.join("alignment.png"))?;
     }
     let table = eval_metrics::markdown_table(&summarize(&records, false));
     dataset_io::write_atomic(&dir.join("table.md"), table.as_bytes())?;
 
     // 7. summary
     step(quiet, 7, "writing summary.md")?;
-    let lines = method_lines(&records);
+    let lines = method_medians(&records);
     let _ = writeln!(
         md,
         "## Evaluation\n\n{} runs (2 methods x 50 sequences x fwd/bwd x 5 runs) evaluated in {eval_secs:.2} s.\n\n{}\n\
@@ -526,7 +373,7 @@ pub fn run(args: &Args) -> Result<()> {
          The paper's metric study on one synthetic sequence: e_align depends much less on where the drift happens than e_t and e_rmse.\n\n\
          ![metric study](metric_study.png)\n\n![alignment](alignment.png)\n\nPer-sequence table: [table.md](table.md).\n",
         records.len(),
-        method_markdown(&lines)
+        medians_markdown(&lines)
     );
     let total = started.elapsed().as_secs_f64();
     let _ = writeln!(md, "Total demo time: {total:.1} s.");
@@ -560,10 +407,7 @@ pub fn run(args: &Args) -> Result<()> {
                 "evaluation": {
                     "runs": records.len(),
                     "seconds": eval_secs,
-                    "methods": lines.iter().map(|l| serde_json::json!({
-                        "method": l.method, "runs": l.runs, "failed": l.failed,
-                        "median_e_align": num(l.e_align), "median_e_r": num(l.e_r), "median_e_s_prime": num(l.e_s_prime),
-                    })).collect::<Vec<_>>(),
+                    "methods": medians_json(&lines),
                 },
                 "files": files.iter().map(|(f, _)| final_dir.join(f).display().to_string()).collect::<Vec<_>>(),
             })
@@ -571,7 +415,7 @@ pub fn run(args: &Args) -> Result<()> {
         return Ok(());
     }
     outln!()?;
-    outln!("{}", method_text(&lines))?;
+    outln!("{}", medians_text(&lines))?;
     outln!("wrote {} in {total:.0} s:", final_dir.display())?;
     let shown: Vec<(String, &str)> = files
         .iter()
@@ -582,14 +426,6 @@ pub fn run(args: &Args) -> Result<()> {
         outln!("  {f:<w$}  {what}")?;
     }
     Ok(())
-}
-
-fn num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::Value::Null
-    }
 }
 
 /// The demo's synthetic sensor: typical noise, the default response, JPEG 90 (or PNG).

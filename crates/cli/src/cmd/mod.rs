@@ -5,6 +5,7 @@ pub mod camera;
 pub mod demo;
 pub mod eval;
 pub mod eval_batch;
+pub mod experiment;
 pub mod exposure;
 pub mod info;
 pub mod plot;
@@ -13,7 +14,7 @@ pub mod synth;
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use camera_model::ImageSize;
 use dataset_io::Sequence;
 use photometric::Vignette;
@@ -32,14 +33,5 @@ pub fn open_sequence(dir: &Path) -> Result<Sequence> {
 /// Reads vignette.png as rectify uses it: 8- or 16-bit grey, a valid map, at the size of
 /// the images.
 pub fn read_vignette(path: &Path, images: ImageSize) -> Result<Vignette> {
-    let (img, _) = dataset_io::read_gray_map(path)?;
-    let v = Vignette::from_u16(&img).with_context(|| path.display().to_string())?;
-    let (w, h) = v.size();
-    if (w, h) != (images.width, images.height) {
-        bail!(
-            "{}: the vignette is {w}x{h} but the images are {images}",
-            path.display()
-        );
-    }
-    Ok(v)
+    Ok(monovo_pipelines::read_vignette(path, images)?)
 }

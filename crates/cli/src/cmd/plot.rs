@@ -1,13 +1,13 @@
 //! `monovo plot`: the paper's cumulative error plots and per-sequence tables from results.csv.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use eval_metrics::{
-    cumulative, parse_csv, summarize, summary_table, DirectionFilter, Metric, RunRecord, TableStyle,
-};
+use anyhow::Result;
+use eval_metrics::{cumulative, summarize, summary_table, DirectionFilter, Metric, TableStyle};
+use monovo_pipelines::load_results as load;
+use monovo_pipelines::paper::{cumulative_chart, cumulative_json, table_json};
 
-use crate::plot::{self, Chart, Corner, Figure, Series, PALETTE};
+use crate::plot::{self, Figure};
 
 /// Arguments of `monovo plot`.
 #[derive(clap::Args, Debug)]
@@ -106,106 +106,6 @@ pub struct TableArgs {
     pub json: bool,
 }
 
-fn load(path: &Path) -> Result<Vec<RunRecord>> {
-    let text = dataset_io::read_text(path).context("the results")?;
-    parse_csv(&text).with_context(|| path.display().to_string())
-}
-
-fn num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::Value::Null
-    }
-}
-
-/// The summaries as one JSON object.
-fn table_json(summaries: &[eval_metrics::SequenceSummary]) -> serde_json::Value {
-    let stat = |s: &eval_metrics::Stat| serde_json::json!({"median": num(s.median), "min": num(s.min), "max": num(s.max)});
-    serde_json::json!({
-        "caption": eval_metrics::TABLE_CAPTION,
-        "rows": summaries.iter().map(|s| serde_json::json!({
-            "sequence": s.sequence,
-            "method": s.method,
-            "direction": s.direction.map(|d| d.to_string()),
-            "runs": s.runs,
-            "failed": s.failed,
-            "e_align": stat(&s.e_align),
-            "e_r_deg": stat(&s.e_r),
-            "e_s_prime": stat(&s.e_s_prime),
-        })).collect::<Vec<_>>(),
-    })
-}
-
-/// The step curve of a cumulative plot, extended to `x_max`.
-pub fn step_points(values: &[f64], x_max: f64) -> Vec<[f64; 2]> {
-    let mut pts = Vec::with_capacity(values.len() * 2 + 2);
-    for (i, &v) in values.iter().enumerate() {
-        pts.push([v, i as f64]);
-        pts.push([v, (i + 1) as f64]);
-    }
-    if let Some(&last) = values.last() {
-        pts.push([x_max.max(last), values.len() as f64]);
-    }
-    pts
-}
-
-/// The cumulative error chart of some records.
-pub fn cumulative_chart(records: &[RunRecord], metric: Metric, filter: DirectionFilter) -> Chart {
-    let curves = cumulative(records, metric, filter);
-    let all: Vec<f64> = curves
-        .iter()
-        .flat_map(|c| c.values.iter().copied())
-        .filter(|v| *v > 0.0)
-        .collect();
-    let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let (lo, hi) = if lo.is_finite() {
-        (lo / 1.5, hi * 1.5)
-    } else {
-        (0.1, 10.0)
-    };
-    // e'_s is a multiplier of at least 1: its axis starts at 1
-    let (lo, hi) = if metric.is_multiplier() {
-        (1.0, hi.max(1.1))
-    } else {
-        (lo, hi)
-    };
-    let runs = curves.iter().map(|c| c.runs).max().unwrap_or(0);
-    let mut chart = Chart::new(
-        format!(
-            "cumulative {} ({} runs per line at most)",
-            metric.name(),
-            runs
-        ),
-        metric.label(),
-        "number of runs",
-    );
-    chart.x_log = true;
-    chart.x_range = Some([lo, hi]);
-    chart.y_range = Some([0.0, runs.max(1) as f64 * 1.04]);
-    chart.legend = Some(Corner::TopLeft);
-    chart.y_integer = true;
-    // one colour per method; with a direction split, backwards runs are dashed
-    let mut methods: Vec<&str> = records.iter().map(|r| r.key.method.as_str()).collect();
-    methods.sort_unstable();
-    methods.dedup();
-    for c in &curves {
-        let method = c.label.split(" (").next().unwrap_or(&c.label);
-        let i = methods.iter().position(|m| *m == method).unwrap_or(0);
-        let mut s = Series::line(
-            format!("{} ({}/{} runs)", c.label, c.values.len(), c.runs),
-            step_points(&c.values, hi),
-            PALETTE[i % PALETTE.len()],
-        );
-        if filter == DirectionFilter::Split && c.label.ends_with("(bwd)") {
-            s = s.dashed();
-        }
-        chart.series.push(s);
-    }
-    chart
-}
-
 /// Runs `monovo plot`.
 pub fn run(args: &Args) -> Result<()> {
     match &args.what {
@@ -228,9 +128,7 @@ pub fn run(args: &Args) -> Result<()> {
                     serde_json::json!({
                         "output": a.output.display().to_string(),
                         "metric": a.metric.name(),
-                        "lines": curves.iter().map(|c| serde_json::json!({
-                            "label": c.label, "runs": c.runs, "values": c.values,
-                        })).collect::<Vec<_>>(),
+                        "lines": cumulative_json(&curves),
                     })
                 )?;
             } else {
@@ -270,53 +168,4 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Seven runs of one method in both directions, e_s around 1, one failure.
-    fn records() -> Vec<RunRecord> {
-        let mut csv = format!("{}\n", eval_metrics::CSV_HEADER);
-        for i in 0..7 {
-            let dir = if i % 2 == 0 { "fwd" } else { "bwd" };
-            let e_s = if i % 3 == 0 {
-                1.0 / (1.0 + 0.1 * i as f64)
-            } else {
-                1.0 + 0.05 * i as f64
-            };
-            csv += &format!("m,sequence_01,{dir},{i},ok,0.{i}5,{e_s},0.5,1,1,0.1,0.1,100,\n");
-        }
-        csv += "m,sequence_01,fwd,9,failed,inf,inf,inf,inf,inf,inf,inf,0,lost\n";
-        parse_csv(&csv).unwrap()
-    }
-
-    #[test]
-    fn cumulative_counts_are_integers_and_e_s_starts_at_1() {
-        let r = records();
-        let c = cumulative_chart(&r, Metric::ES, DirectionFilter::Both);
-        assert_eq!(c.x_range.map(|x| x[0]), Some(1.0));
-        assert!(c.x_log && c.y_integer);
-        assert!(c.x_label.contains("e'_s") && c.y_label == "number of runs");
-        // the step curve of e'_s starts at or right of 1 and reaches the 7 successful runs
-        let pts = &c.series[0].points;
-        assert!(pts.iter().all(|p| p[0] >= 1.0), "{pts:?}");
-        assert_eq!(pts.last().map(|p| p[1]), Some(7.0));
-        assert!(
-            c.series[0].label.contains("7/8 runs"),
-            "{}",
-            c.series[0].label
-        );
-        let c = cumulative_chart(&r, Metric::EAlign, DirectionFilter::Split);
-        assert!(c.x_range.unwrap()[0] < 0.05);
-        assert_eq!(c.series.len(), 2);
-        assert!(
-            c.series.iter().any(|s| s.dashed),
-            "backwards runs are dashed"
-        );
-        assert!(c.x_label.contains("ground-truth length unit"));
-        let c = cumulative_chart(&r, Metric::ER, DirectionFilter::Both);
-        assert!(c.x_label.contains("degrees"));
-    }
 }
