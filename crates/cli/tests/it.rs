@@ -5,6 +5,7 @@ mod calib;
 mod camera;
 mod common;
 mod eval;
+mod experiment;
 mod exposure;
 mod faults;
 mod figures;

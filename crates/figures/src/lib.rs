@@ -258,6 +258,9 @@ pub enum Panel {
     Chart(Chart),
     /// A colour-mapped field.
     Heatmap(Heatmap),
+    /// Only the legend of a chart's series, centred in the panel in as many columns as fit
+    /// (a legend shared by several panels).
+    Legend(Chart),
 }
 
 /// A figure: panels placed in fractions `[x, y, w, h]` of the canvas.
@@ -602,9 +605,30 @@ fn draw_figure<DB: DrawingBackend>(
         match panel {
             Panel::Chart(c) => draw_chart(&area, c, k)?,
             Panel::Heatmap(h) => draw_heatmap(&area, h, k, vector)?,
+            Panel::Legend(c) => draw_legend_panel(&area, c, k)?,
         }
     }
     Ok(())
+}
+
+/// A legend alone, centred in `area`, in as many columns as fit its width.
+fn draw_legend_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    k: Scale,
+) -> Result<()> {
+    let Some(lg) = Legend::of(area, c, k)? else {
+        return Ok(());
+    };
+    let (w, h) = area.dim_in_pixel();
+    let (w, h) = (w as i32, h as i32);
+    let (col_w, _) = lg.size(k);
+    let columns = ((w / col_w.max(1)) as usize).clamp(1, lg.entries.len());
+    let rows = lg.entries.len().div_ceil(columns) as i32;
+    let box_h = rows * lg.line_h + k.px(Legend::PAD);
+    let x = ((w - col_w * columns as i32) / 2).max(0);
+    let y = ((h - box_h) / 2).max(0);
+    lg.draw(area, (x, y), k, columns)
 }
 
 // ------------------------------------------------------------------------------- charts

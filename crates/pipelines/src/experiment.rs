@@ -598,6 +598,11 @@ pub fn grouped_figure(
         c.legend = Some(Corner::TopLeft);
         c
     };
+    let short = if metric == Metric::ES {
+        "e'_s"
+    } else {
+        metric.name()
+    };
     let heading = |what: &str| {
         if exp.title.is_empty() {
             what.to_string()
@@ -614,7 +619,7 @@ pub fn grouped_figure(
     };
     match exp.layout {
         Layout::Overlay => {
-            let mut c = chart(heading(&format!("cumulative {}", metric.name())));
+            let mut c = chart(heading(&format!("cumulative {short}")));
             for (vi, (v, cs)) in exp.variations.iter().zip(&curves).enumerate() {
                 for (i, cur) in cs {
                     let label = format!("{}, {}", exp.methods[*i].label, v.label);
@@ -624,40 +629,42 @@ pub fn grouped_figure(
             Figure::single(c, 1000, 650)
         }
         Layout::Panels => {
+            // a grid of panels without legends and one legend of the methods below them
             let n = exp.variations.len().max(1);
             let cols = n.min(3);
             let rows = n.div_ceil(cols);
-            let (pw, ph) = (560u32, 430u32);
-            let panels = exp
+            let (pw, ph, legend_h) = (560u32, 430u32, 70u32);
+            let height = ph * rows as u32 + legend_h;
+            let grid = f64::from(ph * rows as u32) / f64::from(height);
+            let mut panels: Vec<(Panel, [f64; 4])> = exp
                 .variations
                 .iter()
                 .zip(&curves)
                 .enumerate()
                 .map(|(k, (v, cs))| {
-                    let mut c = chart(heading(&format!(
-                        "{}: cumulative {}",
-                        v.label,
-                        metric.name()
-                    )));
+                    let mut c = chart(heading(&format!("{}: cumulative {short}", v.label)));
+                    c.legend = None;
                     for (i, cur) in cs {
                         c.series
                             .push(series(*i, cur, exp.methods[*i].label.clone()));
                     }
-                    let (col, row) = (k % cols, k / cols);
-                    (
-                        Panel::Chart(c),
-                        [
-                            col as f64 / cols as f64,
-                            row as f64 / rows as f64,
-                            1.0 / cols as f64,
-                            1.0 / rows as f64,
-                        ],
-                    )
+                    let (col, row) = ((k % cols) as f64, (k / cols) as f64);
+                    let (fw, fh) = (1.0 / cols as f64, grid / rows as f64);
+                    (Panel::Chart(c), [col * fw, row * fh, fw, fh])
                 })
                 .collect();
+            let mut legend = chart(String::new());
+            for (i, m) in exp.methods.iter().enumerate() {
+                legend.series.push(Series::line(
+                    m.label.clone(),
+                    Vec::new(),
+                    PALETTE[i % PALETTE.len()],
+                ));
+            }
+            panels.push((Panel::Legend(legend), [0.0, grid, 1.0, 1.0 - grid]));
             Figure {
                 width: pw * cols as u32,
-                height: ph * rows as u32,
+                height,
                 panels,
             }
         }
@@ -691,7 +698,8 @@ impl ExperimentReport {
             "variation", "method", "runs", "failed"
         );
         for name in &self.metrics {
-            let _ = write!(s, "  {:>12}", format!("median {name}"));
+            let name = if *name == "e_s" { "e'_s" } else { name };
+            let _ = write!(s, "  {:>14}", format!("median {name}"));
         }
         s.push('\n');
         for g in &self.groups {
@@ -701,7 +709,7 @@ impl ExperimentReport {
                 g.variation, g.method, g.runs, g.failed
             );
             for v in &g.medians {
-                let _ = write!(s, "  {:>12}", fmt_median(*v));
+                let _ = write!(s, "  {:>14}", fmt_median(*v));
             }
             s.push('\n');
         }
