@@ -25,6 +25,7 @@
 
 mod batch;
 pub mod camera;
+pub mod demo;
 mod error;
 mod eval;
 pub mod experiment;

@@ -1,25 +1,20 @@
 //! `monovo demo`: the whole benchmark, end to end, on synthetic data with known truth.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use camera_model::{Image, ImageSize};
+use anyhow::Result;
+use camera_model::ImageSize;
 use dataset_io::{OutputDir, Sequence};
-use eval_metrics::{evaluate, summarize, DirectionFilter, Metric};
-use monovo_pipelines::paper::{medians_json, medians_markdown, medians_text};
-use monovo_pipelines::{
-    cumulative_chart, evaluate_tree, load_ground_truth, load_trajectory, method_medians,
-    metric_study_figure, save_alignment_figure, BatchOptions,
+use monovo_pipelines::demo::{
+    check_demo_target, demo_files, demo_files_text, evaluate_benchmark, write_frame_previews,
+    MARKER,
 };
+use monovo_pipelines::paper::{medians_json, medians_text};
 
 use crate::cmd::{calib, rectify, synth};
-use crate::plot::{self, Figure};
 use crate::progress::Bars;
-
-/// Marks a folder as written by `monovo demo`, so that a later demo may replace it.
-const MARKER: &str = ".monovo-demo";
 
 /// Arguments of `monovo demo`.
 #[derive(clap::Args, Debug)]
@@ -55,30 +50,11 @@ fn step(quiet: bool, n: usize, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// Checks the demo's folder before any work: it must not exist, or (with --force) have been
-/// written by an earlier demo, or be empty.
-fn check_target(target: &Path, force: bool) -> Result<()> {
-    OutputDir::check(target, force)?;
-    if target.exists() {
-        let earlier_demo = target.join(MARKER).is_file();
-        let empty = std::fs::read_dir(target)
-            .map(|mut d| d.next().is_none())
-            .unwrap_or(false);
-        if !earlier_demo && !empty {
-            bail!(
-                "{}: exists and was not written by `monovo demo`; refusing to replace it even with --force (choose another folder with -o)",
-                target.display()
-            );
-        }
-    }
-    Ok(())
-}
-
 /// Runs `monovo demo`.
 pub fn run(args: &Args) -> Result<()> {
     let started = Instant::now();
     let target = &args.output;
-    check_target(target, args.force)?;
+    check_demo_target(target, args.force)?;
     let quiet = args.json;
     let out = OutputDir::create(target, args.force)?;
     out.write(MARKER, b"written by monovo demo\n")?;
@@ -262,33 +238,7 @@ pub fn run(args: &Args) -> Result<()> {
             rectified.frames as f64 / rectified.seconds.max(1e-9)
         )?;
     }
-    let rect = Sequence::open(&dir.join("rectified"))?;
-    let k = rect
-        .camera()
-        .map(|c| c.input.intrinsics())
-        .context("the rectified sequence has no camera.txt")?;
-    let mid = rect.len() / 2;
-    let raw_mid = Sequence::open(&dir.join("sequence"))?.decode(mid)?;
-    dataset_io::write_png_u8(
-        &dir.join("frame_raw.png"),
-        raw_mid.width(),
-        raw_mid.height(),
-        1,
-        raw_mid.data(),
-        dataset_io::PngSpeed::Default,
-    )?;
-    let rect_mid = rect.decode(mid)?;
-    // stretch the linear output for viewing
-    let max = rect_mid.data().iter().copied().max().unwrap_or(1).max(1) as f32;
-    let shown: Image<u8> = rect_mid.map(|v| ((v as f32 / max).sqrt() * 255.0) as u8);
-    dataset_io::write_png_u8(
-        &dir.join("frame_rectified.png"),
-        640,
-        480,
-        1,
-        shown.data(),
-        dataset_io::PngSpeed::Default,
-    )?;
+    let k = write_frame_previews(&dir)?;
     let _ = writeln!(
         md,
         "## Rectification\n\nFOV camera (omega {:.3}) at 640x512 to the `crop` pinhole at 640x480: fx={:.3} fy={:.3} cx={:.3} cy={:.3}; \
@@ -313,87 +263,26 @@ pub fn run(args: &Args) -> Result<()> {
     };
     synth::write_results(&res_out, &res_args)?;
     res_out.commit()?;
-    let csv = dir.join("results.csv");
-    let batch = evaluate_tree(
-        &BatchOptions {
-            dataset: dir.join("benchmark/dataset"),
-            results: dir.join("benchmark/results"),
-            output: Some(csv),
-            force: false,
-            keep_going: false,
-        },
-        &Bars::default(),
-    )?;
-    let eval_secs = batch.seconds;
-    let records = batch.records;
+    let evaluation = evaluate_benchmark(&dir, &Bars::default())?;
+    let (records, eval_secs, lines) =
+        (&evaluation.records, evaluation.seconds, &evaluation.medians);
     if !quiet {
         outln!("      {} runs evaluated in {eval_secs:.2} s", records.len())?;
     }
-
-    // 6. plots
     step(
         quiet,
         6,
         "plotting: cumulative errors, metric study, alignment figure",
     )?;
-    for (metric, file, split) in [
-        (
-            Metric::EAlign,
-            "cumulative_e_align.png",
-            DirectionFilter::Both,
-        ),
-        (Metric::ER, "cumulative_e_r.png", DirectionFilter::Both),
-        (Metric::ES, "cumulative_e_s.png", DirectionFilter::Split),
-    ] {
-        let chart = cumulative_chart(&records, metric, split);
-        plot::save(&Figure::single(chart, 900, 600), &dir.join(file))?;
-    }
-    plot::save(
-        &metric_study_figure(args.seed)?,
-        &dir.join("metric_study.png"),
-    )?;
-    let gt_path = dir.join("benchmark/dataset/sequence_01/groundtruthSync.txt");
-    let gt = load_ground_truth(&gt_path)?;
-    let run_path = dir.join("benchmark/results/feature/sequence_01/fwd_0.txt");
-    let run = load_trajectory(&run_path, None, None)?;
-    let ev = evaluate(&run, &gt);
-    if ev.is_ok() {
-        save_alignment_figure(&ev, &gt, &dir.join("alignment.png"))?;
-    }
-    let table = eval_metrics::markdown_table(&summarize(&records, false));
-    dataset_io::write_atomic(&dir.join("table.md"), table.as_bytes())?;
+    evaluation.draw(&dir, args.seed)?;
 
     // 7. summary
     step(quiet, 7, "writing summary.md")?;
-    let lines = method_medians(&records);
-    let _ = writeln!(
-        md,
-        "## Evaluation\n\n{} runs (2 methods x 50 sequences x fwd/bwd x 5 runs) evaluated in {eval_secs:.2} s.\n\n{}\n\
-         ![e_align](cumulative_e_align.png)\n![e_r](cumulative_e_r.png)\n![e_s](cumulative_e_s.png)\n\n\
-         The paper's metric study on one synthetic sequence: e_align depends much less on where the drift happens than e_t and e_rmse.\n\n\
-         ![metric study](metric_study.png)\n\n![alignment](alignment.png)\n\nPer-sequence table: [table.md](table.md).\n",
-        records.len(),
-        medians_markdown(&lines)
-    );
+    md.push_str(&evaluation.markdown());
     let total = started.elapsed().as_secs_f64();
     let _ = writeln!(md, "Total demo time: {total:.1} s.");
     dataset_io::write_atomic(&dir.join("summary.md"), md.as_bytes())?;
     let final_dir = out.commit()?;
-    let files: Vec<(&str, &str)> = vec![
-        ("summary.md", "the report, with every figure"),
-        ("table.md", "the paper's per-sequence table"),
-        ("results.csv", "1000 evaluated runs"),
-        ("cumulative_e_align.png", "cumulative plots (also e_r, e_s)"),
-        ("metric_study.png", "where drift happens vs. the metrics"),
-        ("alignment.png", "start- and end-aligned trajectory"),
-        ("response.png", "calibrated response vs. truth"),
-        ("vignette.png", "calibrated vignette vs. truth"),
-        ("frame_raw.png", "a raw frame (and frame_rectified.png)"),
-        (
-            "sequence/",
-            "the synthetic sequence (rectified/: corrected)",
-        ),
-    ];
     if args.json {
         outln!(
             "{}",
@@ -407,24 +296,17 @@ pub fn run(args: &Args) -> Result<()> {
                 "evaluation": {
                     "runs": records.len(),
                     "seconds": eval_secs,
-                    "methods": medians_json(&lines),
+                    "methods": medians_json(lines),
                 },
-                "files": files.iter().map(|(f, _)| final_dir.join(f).display().to_string()).collect::<Vec<_>>(),
+                "files": demo_files(&final_dir),
             })
         )?;
         return Ok(());
     }
     outln!()?;
-    outln!("{}", medians_text(&lines))?;
+    outln!("{}", medians_text(lines))?;
     outln!("wrote {} in {total:.0} s:", final_dir.display())?;
-    let shown: Vec<(String, &str)> = files
-        .iter()
-        .map(|(f, what)| (final_dir.join(f).display().to_string(), *what))
-        .collect();
-    let w = shown.iter().map(|(f, _)| f.len()).max().unwrap_or(0);
-    for (f, what) in &shown {
-        outln!("  {f:<w$}  {what}")?;
-    }
+    out!("{}", demo_files_text(&final_dir))?;
     Ok(())
 }
 
