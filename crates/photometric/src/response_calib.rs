@@ -1018,9 +1018,7 @@ fn censor_range(var: &[f64], z: f64, half: f64) -> (f64, f64) {
 }
 
 fn variance_table(u: &[f64], noise: &NoiseModel) -> Vec<f64> {
-    (0..u.len())
-        .map(|k| noise.variance(u, k as f64))
-        .collect()
+    (0..u.len()).map(|k| noise.variance(u, k as f64)).collect()
 }
 
 /// A starting point: a few iterations of the paper's alternation in the energy domain
@@ -1191,12 +1189,8 @@ impl<T: Sample> Solver<'_, T> {
         let (mut u, mut state, mut noise, z, max_iter) = match warm {
             Some(w) => (w.u, w.state, Some(w.noise), w.censor_sigmas, w.iterations),
             None => {
-                let mut u = initial_response(
-                    self.frames,
-                    self.levels,
-                    self.exposures,
-                    INITIAL_ITERATIONS,
-                );
+                let mut u =
+                    initial_response(self.frames, self.levels, self.exposures, INITIAL_ITERATIONS);
                 let g = 128.0 / u[self.levels.gauge()].max(1e-12);
                 for v in u.iter_mut() {
                     *v *= g;
@@ -1715,11 +1709,7 @@ fn calibrate<T: Sample>(
     let (table, std_error, prior_error) = if nk == top as usize + 1 {
         (knots_u, std_error, prior_error)
     } else {
-        let all = |v: &[f64]| -> Vec<f64> {
-            (0..=top)
-                .map(|g| interp(v, levels.pos(g)))
-                .collect()
-        };
+        let all = |v: &[f64]| -> Vec<f64> { (0..=top).map(|g| interp(v, levels.pos(g))).collect() };
         (all(&knots_u), all(&std_error), all(&prior_error))
     };
     let response = InverseResponse::from_values(table)?;

@@ -1,7 +1,9 @@
 //! Response calibration of sensors deeper than 8 bits (10 to 16 bits in 16-bit samples)
 //! against synthetic sweeps with known truth.
 use camera_model::Image;
-use photometric::{calibrate_response_deep, PhotometricError, ResponseCalibration, ResponseOptions};
+use photometric::{
+    calibrate_response_deep, PhotometricError, ResponseCalibration, ResponseOptions,
+};
 use synthetic::camera::ResponseCurve;
 use synthetic::scene::{Sweep, SweepConfig};
 use synthetic::sensor::{NoiseLevel, Sensor};
@@ -92,7 +94,14 @@ fn twelve_bit_sweep_is_accurate_to_half_a_percent() {
 /// everywhere and below 0.5% from 5% of the range up.
 #[test]
 fn twelve_bit_gamma_is_accurate_above_the_toe() {
-    let s = sweep(3, 320, 256, 120, Sensor::preset(NoiseLevel::Low), ResponseCurve::Gamma(1.8));
+    let s = sweep(
+        3,
+        320,
+        256,
+        120,
+        Sensor::preset(NoiseLevel::Low),
+        ResponseCurve::Gamma(1.8),
+    );
     let cal = calibrate(&s, 12);
     let truth = s.response_bits(12);
     let (_, abs) = errors(&cal, &truth);
@@ -108,7 +117,14 @@ fn twelve_bit_gamma_is_accurate_above_the_toe() {
 #[test]
 fn ten_and_sixteen_bit_sweeps_are_accurate() {
     for (bits, seed) in [(10, 5), (16, 6)] {
-        let s = sweep(seed, 240, 192, 60, Sensor::preset(NoiseLevel::Typical), ResponseCurve::Dataset);
+        let s = sweep(
+            seed,
+            240,
+            192,
+            60,
+            Sensor::preset(NoiseLevel::Typical),
+            ResponseCurve::Dataset,
+        );
         let cal = calibrate(&s, bits);
         let truth = s.response_bits(bits);
         assert_eq!(cal.response.table().len(), 1 << bits);
@@ -120,7 +136,14 @@ fn ten_and_sixteen_bit_sweeps_are_accurate() {
 /// An 8-bit sweep through the deep entry point gives the 8-bit calibration exactly.
 #[test]
 fn eight_bits_through_the_deep_entry_is_the_eight_bit_calibration() {
-    let s = sweep(7, 160, 128, 24, Sensor::preset(NoiseLevel::Typical), ResponseCurve::Dataset);
+    let s = sweep(
+        7,
+        160,
+        128,
+        24,
+        Sensor::preset(NoiseLevel::Typical),
+        ResponseCurve::Dataset,
+    );
     let deep = calibrate(&s, 8);
     let mut narrow: Vec<Image<u8>> = (0..s.exposures_ms.len())
         .map(|i| Image::new(s.width, s.height, s.render(i)).unwrap())
@@ -149,9 +172,18 @@ fn values_above_the_bit_depth_are_refused() {
     )
     .unwrap_err();
     let text = e.to_string();
-    assert!(text.contains("frame 0") && text.contains("5000") && text.contains("4095"), "{text}");
+    assert!(
+        text.contains("frame 0") && text.contains("5000") && text.contains("4095"),
+        "{text}"
+    );
     let f = Image::new(4, 4, vec![0u16; 16]).unwrap();
-    let e = calibrate_response_deep(&[f.clone(), f], 17, &[1.0, 2.0], &ResponseOptions::default(), &|_, _| {})
-        .unwrap_err();
+    let e = calibrate_response_deep(
+        &[f.clone(), f],
+        17,
+        &[1.0, 2.0],
+        &ResponseOptions::default(),
+        &|_, _| {},
+    )
+    .unwrap_err();
     assert!(matches!(e, PhotometricError::BitDepth(17)), "{e}");
 }

@@ -267,7 +267,9 @@ impl Sensor {
         frame_seed: u64,
         energy: impl Fn(usize, usize) -> f64 + Sync,
     ) -> Vec<u8> {
-        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| v as u8)
+        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| {
+            v as u8
+        })
     }
 
     /// [`Sensor::capture`] for a sensor of `bits` bits (8 to 16): the values `0 ..= 2^bits -
@@ -285,7 +287,9 @@ impl Sensor {
         frame_seed: u64,
         energy: impl Fn(usize, usize) -> f64 + Sync,
     ) -> Vec<u16> {
-        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| v as u16)
+        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| {
+            v as u16
+        })
     }
 
     #[allow(clippy::too_many_arguments)]
