@@ -599,7 +599,7 @@ pub fn response_figure(
     let mut c1 = Chart::new(
         "inverse response U",
         "grey value I",
-        &format!("U(I) (scaled to {scale})"),
+        format!("U(I) (scaled to {scale})"),
     );
     c1.legend = Some(Corner::TopLeft);
     c1.x_range = Some([0.0, top]);
@@ -623,7 +623,7 @@ pub fn response_figure(
     let mut c2 = Chart::new(
         "uncertainty of U",
         "grey value I",
-        &format!("grey values ({scale} scale)"),
+        format!("grey values ({scale} scale)"),
     );
     c2.legend = Some(Corner::TopLeft);
     c2.x_range = Some([0.0, top]);
@@ -674,12 +674,12 @@ pub fn response_figure(
         String::new()
     };
     c3.series.push(Series::line(
-        &format!("observed values{per}"),
+        format!("observed values{per}"),
         steps(&cal.histogram, 1.0),
         PALETTE[1],
     ));
     c3.series.push(Series::line(
-        &format!("used (by prediction){per}"),
+        format!("used (by prediction){per}"),
         steps(&cal.used, cal.knot_step),
         PALETTE[4],
     ));
