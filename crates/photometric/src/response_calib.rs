@@ -82,6 +82,12 @@ struct Levels {
     scale: f64,
 }
 
+/// The knot whose `U` fixes the scale during the iteration, of a table of `n` knots (128 of
+/// 256).
+fn gauge(n: usize) -> usize {
+    n / 2
+}
+
 impl Levels {
     fn new(bits: u32) -> Levels {
         let top = (1u32 << bits) - 1;
@@ -91,11 +97,6 @@ impl Levels {
             knots,
             scale: (knots - 1) as f64 / top as f64,
         }
-    }
-
-    /// The knot whose `U` fixes the scale during the iteration (128 of 256).
-    fn gauge(&self) -> usize {
-        self.knots / 2
     }
 
     /// The knot position of a grey value.
@@ -736,7 +737,7 @@ fn u_system(
     let uv = DVector::from_column_slice(u);
     let pu = penalty * &uv * lambda;
     let n = u.len();
-    let gauge = n / 2;
+    let gauge = gauge(n);
     let profiled = !sums.hess.is_empty();
     if profiled {
         for r in 0..n {
@@ -790,7 +791,7 @@ fn solve_u_step(
     let (mut a, b) = u_system(u, sums, penalty, lambda);
     // Levenberg-Marquardt: damping relative to each value's information from the data
     for k in 0..n {
-        if k != n / 2 || sums.hess.is_empty() {
+        if k != gauge(n) || sums.hess.is_empty() {
             a[(k, k)] += damping * sums.diag[k];
         }
     }
@@ -1191,7 +1192,7 @@ impl<T: Sample> Solver<'_, T> {
             None => {
                 let mut u =
                     initial_response(self.frames, self.levels, self.exposures, INITIAL_ITERATIONS);
-                let g = 128.0 / u[self.levels.gauge()].max(1e-12);
+                let g = 128.0 / u[gauge(self.levels.knots)].max(1e-12);
                 for v in u.iter_mut() {
                     *v *= g;
                 }
@@ -1304,8 +1305,8 @@ impl<T: Sample> Solver<'_, T> {
             make_monotone(&mut nu, &info);
             // the gauge: U at the middle knot stays (B' scales with U); U(top) = 255 at the
             // end
-            let gauge = self.levels.gauge();
-            let s = u[gauge] / nu[gauge];
+            let g = gauge(n);
+            let s = u[g] / nu[g];
             for v in nu.iter_mut() {
                 *v *= s;
             }
@@ -1385,7 +1386,7 @@ fn standard_errors(
 ) -> Result<(Vec<f64>, Vec<f64>), PhotometricError> {
     let (u, ext) = extrapolate(&sol.u, first, last);
     let n = u.len();
-    let gauge = n / 2;
+    let gauge = gauge(n);
     let penalty = &sol.penalty;
     let (a, _) = u_system(&sol.u_prev, &sol.sums, penalty, 1.0);
     let chol = a.cholesky().ok_or_else(singular)?;

@@ -5,23 +5,10 @@ use photometric::{
     calibrate_response_deep, PhotometricError, ResponseCalibration, ResponseOptions,
 };
 use synthetic::camera::ResponseCurve;
-use synthetic::scene::{Sweep, SweepConfig};
-use synthetic::sensor::{NoiseLevel, Sensor};
+use synthetic::scene::Sweep;
 
-fn sweep(seed: u64, w: usize, h: usize, n: usize, sensor: Sensor, curve: ResponseCurve) -> Sweep {
-    Sweep::new(
-        seed,
-        SweepConfig {
-            width: w,
-            height: h,
-            frames: n,
-            t0: 0.05,
-            factor: (20.0f64 / 0.05).powf(1.0 / (n - 1) as f64),
-            sensor,
-            response: curve,
-        },
-    )
-}
+use crate::response::sweep;
+use synthetic::sensor::{NoiseLevel, Sensor};
 
 fn frames(s: &Sweep, bits: u32) -> Vec<Image<u16>> {
     (0..s.exposures_ms.len())

@@ -310,41 +310,9 @@ fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Reads every frame of a sequence with its exposure; errors when exposures are missing.
-pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
-    if let Some((k, line)) = seq.times().first_unknown_exposure() {
-        bail!(
-            "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); calibration needs the exposure time of every frame (third column, > 0)",
-            seq.times_path().display()
-        );
-    }
-    let idx = seq.indices(0..seq.len(), false);
-    let pb = progress::bar(idx.len() as u64, "decoding", "frames");
-    let mut frames = Vec::with_capacity(idx.len());
-    let mut exposures = Vec::with_capacity(idx.len());
-    seq.process(
-        &idx,
-        rayon::current_num_threads() * 4,
-        |f| {
-            pb.inc(1);
-            Ok::<_, anyhow::Error>(f)
-        },
-        |f| {
-            exposures.push(f.exposure_ms.unwrap_or(0.0));
-            frames.push(f.image);
-            Ok(())
-        },
-    )?;
-    pb.finish_and_clear();
-    Ok((frames, exposures))
-}
-
-/// Reads every frame of a 16-bit sequence with its exposure, with the values as `bits`-bit
-/// samples (see [`deep_layout`]); returns the frames, exposures and bit depth.
-pub fn load_exposed_deep_frames(
-    seq: &Sequence,
-    bit_depth: Option<u32>,
-) -> Result<(Vec<Image<u16>>, Vec<f64>, u32)> {
+/// Reads every frame of a sequence at its own bit depth with its exposure; errors when
+/// exposures are missing.
+fn load_exposed_native(seq: &Sequence) -> Result<(Vec<dataset_io::GrayImage>, Vec<f64>)> {
     if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
             "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); calibration needs the exposure time of every frame (third column, > 0)",
@@ -363,18 +331,60 @@ pub fn load_exposed_deep_frames(
             Ok::<_, anyhow::Error>(f)
         },
         |f| {
-            let image = match f.image {
-                dataset_io::GrayImage::U16(i) => i,
-                dataset_io::GrayImage::U8(_) => {
-                    bail!("{}: an 8-bit frame in a 16-bit sequence", f.name)
-                }
-            };
             exposures.push(f.exposure_ms.unwrap_or(0.0));
-            frames.push(image);
+            frames.push(f.image);
             Ok(())
         },
     )?;
     pb.finish_and_clear();
+    Ok((frames, exposures))
+}
+
+/// The frames of `seq` (read by [`load_exposed_native`]) as one sample type; a frame of the
+/// other depth is an error naming it.
+fn same_depth<T>(
+    seq: &Sequence,
+    frames: Vec<dataset_io::GrayImage>,
+    pick: impl Fn(dataset_io::GrayImage) -> Option<Image<T>>,
+) -> Result<Vec<Image<T>>> {
+    let bits = seq.bits_per_sample();
+    frames
+        .into_iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let other = f.bits();
+            pick(f).with_context(|| {
+                format!(
+                    "{}: a {other}-bit frame in a {bits}-bit sequence",
+                    seq.names()[i]
+                )
+            })
+        })
+        .collect()
+}
+
+/// Reads every frame of an 8-bit sequence with its exposure; errors when exposures are
+/// missing.
+pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
+    let (frames, exposures) = load_exposed_native(seq)?;
+    let frames = same_depth(seq, frames, |f| match f {
+        dataset_io::GrayImage::U8(i) => Some(i),
+        dataset_io::GrayImage::U16(_) => None,
+    })?;
+    Ok((frames, exposures))
+}
+
+/// Reads every frame of a 16-bit sequence with its exposure, with the values as `bits`-bit
+/// samples (see [`deep_layout`]); returns the frames, exposures and bit depth.
+pub fn load_exposed_deep_frames(
+    seq: &Sequence,
+    bit_depth: Option<u32>,
+) -> Result<(Vec<Image<u16>>, Vec<f64>, u32)> {
+    let (frames, exposures) = load_exposed_native(seq)?;
+    let mut frames = same_depth(seq, frames, |f| match f {
+        dataset_io::GrayImage::U16(i) => Some(i),
+        dataset_io::GrayImage::U8(_) => None,
+    })?;
     let (bits, shift) = deep_layout(&frames, bit_depth)?;
     if shift > 0 {
         crate::warn(format_args!(
@@ -414,8 +424,9 @@ pub fn deep_layout(frames: &[Image<u16>], bit_depth: Option<u32>) -> Result<(u32
     )
 }
 
-/// What the sweep offers before calibrating: exposures and grey values.
-fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
+/// What the sweep offers before calibrating: exposures and grey values (`top` is the
+/// saturated value, 255 for 8-bit frames).
+fn sweep_report<T: Copy + Into<u32>>(frames: &[Image<T>], top: u32, exposures: &[f64]) -> String {
     let mut sorted: Vec<f64> = exposures.to_vec();
     sorted.sort_by(f64::total_cmp);
     sorted.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
@@ -423,15 +434,16 @@ fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
         .windows(2)
         .map(|p| p[1] / p[0])
         .fold(1.0f64, f64::max);
-    let mut hist = [0u64; 256];
+    let top = top as usize;
+    let mut hist = vec![0u64; top + 1];
     for f in frames {
         for &v in f.data() {
-            hist[v as usize] += 1;
+            hist[(v.into() as usize).min(top)] += 1;
         }
     }
     let total: u64 = hist.iter().sum();
-    let lo = (0..256).find(|&k| hist[k] > 0).unwrap_or(0);
-    let hi = (0..255).rev().find(|&k| hist[k] > 0).unwrap_or(0);
+    let lo = (0..=top).find(|&k| hist[k] > 0).unwrap_or(0);
+    let hi = (0..top).rev().find(|&k| hist[k] > 0).unwrap_or(0);
     let rare = (lo..=hi).filter(|&k| hist[k] < 100).count();
     format!(
         "{} frames, {} exposures from {:.4} to {:.4} ms (largest step x{:.3}); grey values {lo}..{hi} observed ({} of them fewer than 100 times), {:.2}% of the observations saturated",
@@ -441,7 +453,7 @@ fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
         sorted.last().copied().unwrap_or(0.0),
         step,
         rare,
-        100.0 * hist[255] as f64 / total.max(1) as f64
+        100.0 * hist[top] as f64 / total.max(1) as f64
     )
 }
 
@@ -472,15 +484,9 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     let (cal, nframes) = if seq.bits_per_sample() == 16 {
         let (frames, exposures, bits) = load_exposed_deep_frames(&seq, a.bit_depth)?;
         if !a.json {
+            outln!("{}", sweep_report(&frames, (1u32 << bits) - 1, &exposures))?;
             outln!(
-                "{} frames of {bits} bits, {} exposures; U is estimated on {} knots and written as {} values",
-                frames.len(),
-                {
-                    let mut d = exposures.clone();
-                    d.sort_by(f64::total_cmp);
-                    d.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
-                    d.len()
-                },
+                "{bits}-bit frames: U is estimated on {} knots and written as {} values",
                 (1usize << bits).min(photometric::MAX_KNOTS),
                 1u32 << bits
             )?;
@@ -496,7 +502,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
             );
         }
         let (mut frames, exposures) = load_exposed_frames(&seq)?;
-        let report = sweep_report(&frames, &exposures);
+        let report = sweep_report(&frames, 255, &exposures);
         if !a.json {
             outln!("{report}")?;
         }
