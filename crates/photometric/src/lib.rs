@@ -43,7 +43,9 @@ pub use correct::{quantize_u16, quantize_u8, Correction, QuantizedCorrection};
 pub use error::PhotometricError;
 pub use noise::NoiseModel;
 pub use response::InverseResponse;
-pub use response_calib::{calibrate_response, ResponseCalibration, ResponseOptions};
+pub use response_calib::{
+    calibrate_response, calibrate_response_deep, ResponseCalibration, ResponseOptions, MAX_KNOTS,
+};
 pub use smoothing::SmoothingChoice;
 pub use vignette::{vignette_errors, Vignette};
 pub use vignette_calib::{

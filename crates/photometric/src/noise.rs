@@ -3,9 +3,6 @@
 
 use nalgebra::{DMatrix, DVector};
 
-/// Number of grey values of an 8-bit frame.
-const LEVELS: usize = 256;
-
 /// The grey-level noise of one observation as a function of its expected grey value `p`:
 /// variance `(read + shot U(p)) / U'(p)^2 + adc` (grey levels squared), with `U'` the
 /// slope of the inverse response per grey level.
@@ -20,10 +17,12 @@ pub struct NoiseModel {
 }
 
 impl NoiseModel {
-    /// The variance at expected grey value `p` for the inverse response `u`.
-    pub fn variance(&self, u: &[f64; LEVELS], p: f64) -> f64 {
-        let p = p.clamp(0.0, 255.0);
-        let k = (p.round() as usize).min(255);
+    /// The variance at expected grey value `p` for the inverse response `u` (a table of at
+    /// least 4 values).
+    pub fn variance(&self, u: &[f64], p: f64) -> f64 {
+        let top = u.len() - 1;
+        let p = p.clamp(0.0, top as f64);
+        let k = (p.round() as usize).min(top);
         let slope = slope_at(u, k);
         let up = interp(u, p).max(0.0);
         ((self.read + self.shot * up) / (slope * slope) + self.adc).max(1e-3)
@@ -32,26 +31,28 @@ impl NoiseModel {
 
 /// `U'` at grey value `k`: the secant over `k - 3 ..= k + 3` (shortened at the ends), at
 /// least a twentieth of the mean slope (noise in `U` must not make the noise model explode).
-pub(crate) fn slope_at(u: &[f64; LEVELS], k: usize) -> f64 {
+pub(crate) fn slope_at(u: &[f64], k: usize) -> f64 {
+    let top = u.len() - 1;
     let a = k.saturating_sub(3);
-    let b = (k + 3).min(255);
+    let b = (k + 3).min(top);
     let s = (u[b] - u[a]) / (b - a) as f64;
-    let mean = (u[255] - u[0]).abs() / 255.0;
+    let mean = (u[top] - u[0]).abs() / top as f64;
     s.max(0.05 * mean).max(1e-12)
 }
 
 /// `U` at a fractional grey value (linear interpolation).
-pub(crate) fn interp(u: &[f64; LEVELS], p: f64) -> f64 {
-    let p = p.clamp(0.0, 255.0);
-    let j = (p as usize).min(254);
+pub(crate) fn interp(u: &[f64], p: f64) -> f64 {
+    let top = u.len() - 1;
+    let p = p.clamp(0.0, top as f64);
+    let j = (p as usize).min(top - 1);
     let f = p - j as f64;
     u[j] + f * (u[j + 1] - u[j])
 }
 
 /// Fits the noise model to residual variances per predicted grey value (non-negative least
 /// squares on the relative error of the bins with enough data).
-pub(crate) fn fit_noise(u: &[f64; LEVELS], rss: &[f64], cnt: &[f64]) -> Option<NoiseModel> {
-    let rows: Vec<(f64, [f64; 3], f64)> = (0..LEVELS)
+pub(crate) fn fit_noise(u: &[f64], rss: &[f64], cnt: &[f64]) -> Option<NoiseModel> {
+    let rows: Vec<(f64, [f64; 3], f64)> = (0..u.len())
         .filter(|&k| cnt[k] >= 50.0)
         .map(|k| {
             let v = rss[k] / cnt[k];
@@ -110,8 +111,8 @@ pub(crate) fn fit_noise(u: &[f64; LEVELS], rss: &[f64], cnt: &[f64]) -> Option<N
 impl NoiseModel {
     /// The variance of `U(I)` (U-units squared) for an observation whose expected value is
     /// the energy `e` (U-units): `read + shot e + adc U'^2`.
-    pub fn energy_variance(&self, u: &[f64; LEVELS], e: f64) -> f64 {
-        let k = u.partition_point(|&v| v <= e).clamp(1, 255);
+    pub fn energy_variance(&self, u: &[f64], e: f64) -> f64 {
+        let k = u.partition_point(|&v| v <= e).clamp(1, u.len() - 1);
         let slope = slope_at(u, k);
         (self.read + self.shot * e.max(0.0) + self.adc * slope * slope).max(1e-9)
     }

@@ -46,11 +46,71 @@ use rayon::prelude::*;
 use crate::noise::{fit_noise, interp, slope_at, NoiseModel};
 use crate::{InverseResponse, PhotometricError};
 
-/// Number of grey values of an 8-bit frame.
-const LEVELS: usize = 256;
+/// Most knots of the table the solver estimates: a frame of `k` bits is calibrated on
+/// `min(2^k, MAX_KNOTS)` equally spaced knots (every grey value up to 9 bits), and the
+/// `2^k`-value table is their linear interpolation.
+pub const MAX_KNOTS: usize = 512;
 
-/// The grey value whose `U` fixes the scale during the iteration.
-const GAUGE: usize = 128;
+/// Samples of a frame: 8-bit grey values, or `k`-bit values in the low bits of 16-bit ones.
+trait Sample: Copy + Send + Sync + 'static {
+    /// The raw value.
+    fn raw(self) -> u32;
+}
+
+impl Sample for u8 {
+    #[inline]
+    fn raw(self) -> u32 {
+        self as u32
+    }
+}
+
+impl Sample for u16 {
+    #[inline]
+    fn raw(self) -> u32 {
+        self as u32
+    }
+}
+
+/// The grey values of the frames and the knots of the estimated table.
+#[derive(Clone, Copy, Debug)]
+struct Levels {
+    /// The largest grey value, `2^k - 1` (saturation).
+    top: u32,
+    /// Number of knots.
+    knots: usize,
+    /// Knot position per grey value, `(knots - 1) / top`.
+    scale: f64,
+}
+
+/// The knot whose `U` fixes the scale during the iteration, of a table of `n` knots (128 of
+/// 256).
+fn gauge(n: usize) -> usize {
+    n / 2
+}
+
+impl Levels {
+    fn new(bits: u32) -> Levels {
+        let top = (1u32 << bits) - 1;
+        let knots = (top as usize + 1).min(MAX_KNOTS);
+        Levels {
+            top,
+            knots,
+            scale: (knots - 1) as f64 / top as f64,
+        }
+    }
+
+    /// The knot position of a grey value.
+    #[inline]
+    fn pos(&self, v: u32) -> f64 {
+        v as f64 * self.scale
+    }
+
+    /// The nearest knot of a grey value.
+    #[inline]
+    fn knot(&self, v: u32) -> usize {
+        ((v as f64 * self.scale).round() as usize).min(self.knots - 1)
+    }
+}
 
 /// Options of [`calibrate_response`].
 ///
@@ -145,10 +205,11 @@ pub(crate) const MAX_ITERATIONS_LIMIT: usize = 100_000;
 /// The result of [`calibrate_response`].
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ResponseCalibration {
-    /// The inverse response, `U(255) = 255`, strictly increasing.
+    /// The inverse response, `U(255) = 255` (`U(2^k - 1) = 255` for `k`-bit frames),
+    /// strictly increasing, one value per grey value of the frames.
     pub response: InverseResponse,
-    /// Standard error of each `U(k)` on the same scale (0 at 255, which is fixed): sampling
-    /// and systematic parts together (see the module documentation).
+    /// Standard error of each `U(k)` on the same scale (0 at the top, which is fixed):
+    /// sampling and systematic parts together (see the module documentation).
     pub std_error: Vec<f64>,
     /// The systematic part: what the prior, the extrapolation and the selection at the ends
     /// may add.
@@ -163,16 +224,20 @@ pub struct ResponseCalibration {
     pub rmse: f64,
     /// Smallest and largest grey value determined by the data (the rest follows from the
     /// prior).
-    pub observed_range: (u8, u8),
+    pub observed_range: (u32, u32),
     /// Grey values not determined by the data (continued by the prior).
-    pub filled: Vec<u8>,
-    /// Observations per grey value (after the saturation mask).
+    pub filled: Vec<u32>,
+    /// Pixels per grey value, over all frames.
     pub histogram: Vec<u64>,
-    /// Observations that entered the last iteration, per predicted grey value.
+    /// Observations that entered the last iteration, per knot of the estimate (per grey
+    /// value for frames of up to 9 bits; see `knot_step`).
     pub used: Vec<u64>,
     /// Predicted grey values in which observations were used.
     pub censor_range: (f64, f64),
-    /// The fitted noise model.
+    /// Grey values per knot of the estimate: 1 for frames of up to 9 bits, `(2^k - 1) /
+    /// (MAX_KNOTS - 1)` for deeper ones.
+    pub knot_step: f64,
+    /// The fitted noise model, in knots (grey values for frames of up to 9 bits).
     pub noise: NoiseModel,
     /// Weight of the prior relative to the mean information per grey value.
     pub prior_weight: f64,
@@ -184,12 +249,18 @@ pub struct ResponseCalibration {
 
 /// The observations next to saturated pixels (within `radius`, the saturated pixels
 /// themselves excluded: they are censored observations) as a bitset, one bit per pixel.
-fn saturation_mask(frame: &[u8], width: usize, height: usize, radius: usize) -> Vec<u64> {
+fn saturation_mask<T: Sample>(
+    frame: &[T],
+    top: u32,
+    width: usize,
+    height: usize,
+    radius: usize,
+) -> Vec<u64> {
     let mut bits = vec![0u64; frame.len().div_ceil(64)];
     if radius == 0 || width == 0 {
         return bits;
     }
-    let sat: Vec<bool> = frame.iter().map(|&v| v == 255).collect();
+    let sat: Vec<bool> = frame.iter().map(|&v| v.raw() >= top).collect();
     let mut h = vec![false; sat.len()];
     for y in 0..height {
         let row = &sat[y * width..(y + 1) * width];
@@ -220,48 +291,51 @@ fn masked(bits: &[u64], p: usize) -> bool {
 /// The forward response `G = U^-1` of a strictly increasing table, piecewise linear, with a
 /// lookup table over `sqrt(energy)` that makes each evaluation a few operations.
 struct Forward {
-    u: [f64; LEVELS],
-    inv_du: [f64; LEVELS],
-    lut: Vec<u8>,
+    u: Vec<f64>,
+    inv_du: Vec<f64>,
+    lut: Vec<u16>,
     lut_scale: f64,
 }
 
 const LUT_SIZE: usize = 4096;
 
 impl Forward {
-    fn new(u: &[f64; LEVELS]) -> Forward {
-        let mut inv_du = [0.0; LEVELS];
-        for j in 0..255 {
+    fn new(u: &[f64]) -> Forward {
+        let n = u.len();
+        let mut inv_du = vec![0.0; n];
+        for j in 0..n - 1 {
             inv_du[j] = 1.0 / (u[j + 1] - u[j]).max(1e-12);
         }
-        let top = u[255].max(1e-12);
+        let top = u[n - 1].max(1e-12);
         let lut_scale = LUT_SIZE as f64 / top.sqrt();
-        let mut lut = vec![0u8; LUT_SIZE + 1];
+        let mut lut = vec![0u16; LUT_SIZE + 1];
         let mut j = 0usize;
         for (b, slot) in lut.iter_mut().enumerate() {
             let e = (b as f64 / lut_scale).powi(2);
-            while j < 254 && u[j + 1] <= e {
+            while j < n - 2 && u[j + 1] <= e {
                 j += 1;
             }
-            *slot = j as u8;
+            *slot = j as u16;
         }
         Forward {
-            u: *u,
+            u: u.to_vec(),
             inv_du,
             lut,
             lut_scale,
         }
     }
 
-    /// `(j, f)` with `G(e) = j + f`, `f` in `[0, 1)`; `None` outside `[U(0), U(255)]`.
+    /// `(j, f)` with `G(e) = j + f` (in knots), `f` in `[0, 1)`; `None` outside
+    /// `[U(0), U(top)]`.
     #[inline]
     fn eval(&self, e: f64) -> Option<(usize, f64)> {
-        if !(e >= self.u[0] && e < self.u[255]) {
+        let n = self.u.len();
+        if !(e >= self.u[0] && e < self.u[n - 1]) {
             return None;
         }
         let b = ((e.sqrt() * self.lut_scale) as usize).min(LUT_SIZE);
         let mut j = self.lut[b] as usize;
-        while j < 254 && self.u[j + 1] <= e {
+        while j < n - 2 && self.u[j + 1] <= e {
             j += 1;
         }
         let f = ((e - self.u[j]) * self.inv_du[j]).clamp(0.0, 1.0);
@@ -306,16 +380,16 @@ struct Sums {
 }
 
 impl Sums {
-    fn new() -> Sums {
+    fn new(n: usize) -> Sums {
         Sums {
-            diag: vec![0.0; LEVELS],
-            off: vec![0.0; LEVELS],
-            rhs: vec![0.0; LEVELS],
+            diag: vec![0.0; n],
+            off: vec![0.0; n],
+            rhs: vec![0.0; n],
             hess: Vec::new(),
             bins: vec![0.0; B_BINS],
-            rss: vec![0.0; LEVELS],
-            cnt: vec![0.0; LEVELS],
-            used: vec![0; LEVELS],
+            rss: vec![0.0; n],
+            cnt: vec![0.0; n],
+            used: vec![0; n],
             sq: 0.0,
             nobs: 0,
             pixels: 0,
@@ -323,7 +397,7 @@ impl Sums {
     }
 
     fn add(&mut self, o: &Sums) {
-        for k in 0..LEVELS {
+        for k in 0..self.diag.len() {
             self.diag[k] += o.diag[k];
             self.off[k] += o.off[k];
             self.rhs[k] += o.rhs[k];
@@ -343,8 +417,10 @@ impl Sums {
 /// What one iteration needs to know about the current model.
 struct Model<'a> {
     fwd: Forward,
-    /// Variance per integer predicted grey value.
-    var: [f64; LEVELS],
+    /// Variance per knot.
+    var: Vec<f64>,
+    /// The frames' grey values and the knots.
+    levels: Levels,
     /// Selection range of predicted grey values (reported) and the energies it maps to
     /// (used: frozen with the range, so that changes of `U` near the ends do not move
     /// observations in and out of the problem).
@@ -411,8 +487,8 @@ const CHUNK_ROWS: usize = 8;
 /// pixel's `B'` (or the paper's closed form for pixels without a usable prediction), then,
 /// with the new `B'`, the gradient and normal equations of the U step, the residual
 /// statistics of the noise model, and for the Hessian subsample the profiled normal matrix.
-fn pass_chunk(
-    frames: &[Image<u8>],
+fn pass_chunk<T: Sample>(
+    frames: &[Image<T>],
     masks: &[Vec<u64>],
     model: &Model<'_>,
     start: usize,
@@ -421,6 +497,7 @@ fn pass_chunk(
     let n = state.len();
     let fwd = &model.fwd;
     let u = &fwd.u;
+    let lv = model.levels;
     // B step
     let mut sjr = vec![0.0f64; n];
     let mut sjj = vec![0.0f64; n];
@@ -432,16 +509,18 @@ fn pass_chunk(
         let px = &f.data()[start..start + n];
         let mk = &masks[i];
         for (x, &k) in px.iter().enumerate() {
+            let k = k.raw();
             // saturated observations and their neighbours do not enter
-            if k == 255 || masked(mk, start + x) {
+            if k >= lv.top || masked(mk, start + x) {
                 continue;
             }
+            let kf = lv.pos(k);
             let b = state[x].b;
             if b.is_finite() {
                 if let Some((j, fr, c)) = model.select(t, b) {
                     let w = c / model.var_at(j, fr);
                     let jac = t * fwd.inv_du[j];
-                    let r = k as f64 - (j as f64 + fr);
+                    let r = kf - (j as f64 + fr);
                     sjr[x] += w * jac * r;
                     sjj[x] += w * jac * jac;
                     cnt[x] += 1;
@@ -449,9 +528,8 @@ fn pass_chunk(
             }
             // for pixels without a usable prediction: the paper's closed form from the
             // observations in range, only to (re)start the pixel
-            let kf = k as f64;
             if kf >= model.lo && kf <= model.hi {
-                num0[x] += t * u[k as usize];
+                num0[x] += t * interp(u, kf);
                 den0[x] += t * t;
                 cnt0[x] += 1;
             }
@@ -477,22 +555,23 @@ fn pass_chunk(
     }
     // U step sums with the new B', weighted by each pixel's relative variance of the last
     // iteration; the residuals give this iteration's
-    let mut sums = Sums::new();
+    let mut sums = Sums::new(lv.knots);
     let mut rr = vec![0.0f64; n];
     let mut rn = vec![0u32; n];
     for (i, (f, &t)) in frames.iter().zip(model.exposures).enumerate() {
         let px = &f.data()[start..start + n];
         let mk = &masks[i];
         for (x, &k) in px.iter().enumerate() {
+            let k = k.raw();
             let st = state[x];
-            if k == 255 || st.n < MIN_PIXEL_OBS || masked(mk, start + x) {
+            if k >= lv.top || st.n < MIN_PIXEL_OBS || masked(mk, start + x) {
                 continue;
             }
             let Some((j, fr, c)) = model.select(t, st.b) else {
                 continue;
             };
             let var = model.var_at(j, fr);
-            let r = k as f64 - (j as f64 + fr);
+            let r = lv.pos(k) - (j as f64 + fr);
             rr[x] += r * r / var;
             rn[x] += 1;
             let w = c / (var * st.s);
@@ -543,16 +622,17 @@ fn pass_chunk(
 /// centre, over every frame: the full-data matrix at the cost of a thousand pixels.
 fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec<f64> {
     let fwd = &model.fwd;
-    let mut hess = vec![0.0f64; LEVELS * LEVELS];
-    let mut model_diag = vec![0.0f64; LEVELS];
-    let mut g = [0.0f64; LEVELS];
+    let n = model.levels.knots;
+    let mut hess = vec![0.0f64; n * n];
+    let mut model_diag = vec![0.0f64; n];
+    let mut g = vec![0.0f64; n];
     let step = (model.b_max / model.b_min).ln() / B_BINS as f64;
     for (bin, &weight) in bins.iter().enumerate() {
         if weight <= 0.0 {
             continue;
         }
         let b = model.b_min * ((bin as f64 + 0.5) * step).exp();
-        let (mut lo, mut hi, mut h) = (LEVELS, 0usize, 0.0);
+        let (mut lo, mut hi, mut h) = (n, 0usize, 0.0);
         for &t in model.exposures {
             let Some((j, fr, c)) = model.select(t, b) else {
                 continue;
@@ -562,10 +642,10 @@ fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec
             let a1 = fr * fwd.inv_du[j];
             // d r / d B' = -t G'(t B')
             let jb = t * fwd.inv_du[j];
-            hess[j * LEVELS + j] += w * a0 * a0;
-            hess[(j + 1) * LEVELS + j + 1] += w * a1 * a1;
-            hess[j * LEVELS + j + 1] += w * a0 * a1;
-            hess[(j + 1) * LEVELS + j] += w * a0 * a1;
+            hess[j * n + j] += w * a0 * a0;
+            hess[(j + 1) * n + j + 1] += w * a1 * a1;
+            hess[j * n + j + 1] += w * a0 * a1;
+            hess[(j + 1) * n + j] += w * a0 * a1;
             model_diag[j] += w * a0 * a0;
             model_diag[j + 1] += w * a1 * a1;
             g[j] -= w * a0 * jb;
@@ -581,7 +661,7 @@ fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec
             for a in lo..=hi {
                 let ga = g[a] / h;
                 if ga != 0.0 {
-                    let row = &mut hess[a * LEVELS..(a + 1) * LEVELS];
+                    let row = &mut hess[a * n..(a + 1) * n];
                     for c in lo..=hi {
                         row[c] -= ga * g[c];
                     }
@@ -595,7 +675,7 @@ fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec
     // the model assumes every selected observation exists; the saturation mask and stuck
     // pixels remove some: scale each value's rows and columns to the information the data
     // actually have (a symmetric diagonal scaling keeps the matrix semi-definite)
-    let r: Vec<f64> = (0..LEVELS)
+    let r: Vec<f64> = (0..n)
         .map(|k| {
             if model_diag[k] > 0.0 {
                 (actual_diag[k] / model_diag[k]).sqrt()
@@ -604,9 +684,9 @@ fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec
             }
         })
         .collect();
-    for a in 0..LEVELS {
-        for c in 0..LEVELS {
-            hess[a * LEVELS + c] *= r[a] * r[c];
+    for a in 0..n {
+        for c in 0..n {
+            hess[a * n + c] *= r[a] * r[c];
         }
     }
     hess
@@ -614,8 +694,8 @@ fn profiled_hessian(model: &Model<'_>, bins: &[f64], actual_diag: &[f64]) -> Vec
 
 /// One pass over all pixels in fixed chunks: the merged sums (in chunk order, so that the
 /// result does not depend on the number of threads) and each chunk's gradient.
-fn pass(
-    frames: &[Image<u8>],
+fn pass<T: Sample>(
+    frames: &[Image<T>],
     masks: &[Vec<u64>],
     model: &Model<'_>,
     state: &mut [PixelState],
@@ -626,7 +706,7 @@ fn pass(
         .enumerate()
         .map(|(c, st)| pass_chunk(frames, masks, model, c * chunk, st))
         .collect();
-    let mut total = Sums::new();
+    let mut total = Sums::new(model.levels.knots);
     for p in &parts {
         total.add(p);
     }
@@ -648,7 +728,7 @@ fn median_info(diag: &[f64]) -> f64 {
 /// Hessian subsample, the one with `B'` fixed) plus `lambda` times the prior, with `U(GAUGE)`
 /// held when `B'` is eliminated (scaling `U` then costs nothing).
 fn u_system(
-    u: &[f64; LEVELS],
+    u: &[f64],
     sums: &Sums,
     penalty: &DMatrix<f64>,
     lambda: f64,
@@ -656,39 +736,37 @@ fn u_system(
     let mut a = penalty * lambda;
     let uv = DVector::from_column_slice(u);
     let pu = penalty * &uv * lambda;
+    let n = u.len();
+    let gauge = gauge(n);
     let profiled = !sums.hess.is_empty();
     if profiled {
-        for r in 0..LEVELS {
-            for c in 0..LEVELS {
-                a[(r, c)] += sums.hess[r * LEVELS + c];
+        for r in 0..n {
+            for c in 0..n {
+                a[(r, c)] += sums.hess[r * n + c];
             }
         }
     } else {
-        for k in 0..LEVELS {
+        for k in 0..n {
             a[(k, k)] += sums.diag[k];
-            if k + 1 < LEVELS {
+            if k + 1 < n {
                 a[(k, k + 1)] += sums.off[k];
                 a[(k + 1, k)] += sums.off[k];
             }
         }
     }
     // the new model is G - a.d, so the residual becomes r + a.d
-    let mut b = DVector::from_fn(LEVELS, |k, _| -sums.rhs[k] - pu[k]);
+    let mut b = DVector::from_fn(n, |k, _| -sums.rhs[k] - pu[k]);
     if profiled {
-        for k in 0..LEVELS {
-            a[(GAUGE, k)] = 0.0;
-            a[(k, GAUGE)] = 0.0;
+        for k in 0..n {
+            a[(gauge, k)] = 0.0;
+            a[(k, gauge)] = 0.0;
         }
-        a[(GAUGE, GAUGE)] = 1.0;
-        b[GAUGE] = 0.0;
+        a[(gauge, gauge)] = 1.0;
+        b[gauge] = 0.0;
     }
     // a tiny ridge keeps the system definite where neither data nor prior reach
-    let ridge = 1e-12
-        * (0..LEVELS)
-            .map(|k| a[(k, k)])
-            .fold(0.0, f64::max)
-            .max(1e-300);
-    for k in 0..LEVELS {
+    let ridge = 1e-12 * (0..n).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-300);
+    for k in 0..n {
         a[(k, k)] += ridge;
     }
     (a, b)
@@ -703,25 +781,26 @@ fn singular() -> PhotometricError {
 /// Solves the U step; returns the step (shortened to a fifth of the range when longer: far
 /// from the solution the linearisation is poor).
 fn solve_u_step(
-    u: &[f64; LEVELS],
+    u: &[f64],
     sums: &Sums,
     penalty: &DMatrix<f64>,
     lambda: f64,
     damping: f64,
-) -> Result<[f64; LEVELS], PhotometricError> {
+) -> Result<Vec<f64>, PhotometricError> {
+    let n = u.len();
     let (mut a, b) = u_system(u, sums, penalty, lambda);
     // Levenberg-Marquardt: damping relative to each value's information from the data
-    for k in 0..LEVELS {
-        if k != GAUGE || sums.hess.is_empty() {
+    for k in 0..n {
+        if k != gauge(n) || sums.hess.is_empty() {
             a[(k, k)] += damping * sums.diag[k];
         }
     }
     let d = a.cholesky().ok_or_else(singular)?.solve(&b);
-    let range = (u[255] - u[0]).abs().max(1e-12);
+    let range = (u[n - 1] - u[0]).abs().max(1e-12);
     let longest = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let alpha = (0.2 * range / longest.max(1e-300)).min(1.0);
-    let mut out = *u;
-    for k in 0..LEVELS {
+    let mut out = u.to_vec();
+    for k in 0..n {
         out[k] += alpha * d[k];
     }
     if out.iter().any(|v| !v.is_finite()) {
@@ -738,8 +817,8 @@ fn solve_u_step(
 /// scale is `smoothness` grey values, or more where the exposure steps leave longer ripples
 /// undetermined: `P / (2 pi)` times `RIPPLE_MARGIN` for the longest period
 /// `P = log(largest ratio of consecutive exposures) * U / U'` over the data's range.
-fn prior_weight(u: &[f64; LEVELS], log_gap: f64, lo: f64, hi: f64, smoothness: f64) -> f64 {
-    let (a, b) = (lo.max(1.0) as usize, (hi as usize).clamp(1, 254));
+fn prior_weight(u: &[f64], log_gap: f64, lo: f64, hi: f64, smoothness: f64) -> f64 {
+    let (a, b) = (lo.max(1.0) as usize, (hi as usize).clamp(1, u.len() - 2));
     let period = (a..=b.max(a))
         .map(|k| log_gap * u[k] / slope_at(u, k))
         .fold(0.0f64, f64::max);
@@ -750,11 +829,11 @@ fn prior_weight(u: &[f64; LEVELS], log_gap: f64, lo: f64, hi: f64, smoothness: f
 /// How far beyond the longest undetermined ripple period the prior reaches.
 const RIPPLE_MARGIN: f64 = 1.3;
 
-/// The third-difference operator's normal matrix `D3^T D3` (256 x 256).
-fn third_difference_normal() -> DMatrix<f64> {
-    let mut m = DMatrix::zeros(LEVELS, LEVELS);
+/// The third-difference operator's normal matrix `D3^T D3` (`n x n`).
+fn third_difference_normal(n: usize) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(n, n);
     let c = [-1.0, 3.0, -3.0, 1.0];
-    for r in 0..LEVELS - 3 {
+    for r in 0..n - 3 {
         for (a, ca) in c.iter().enumerate() {
             for (b, cb) in c.iter().enumerate() {
                 m[(r + a, r + b)] += ca * cb;
@@ -767,9 +846,10 @@ fn third_difference_normal() -> DMatrix<f64> {
 /// The values the data determine: from the first to the last grey value with at least
 /// `MIN_DETERMINING` observations predicted there.
 fn data_range(used: &[u64]) -> (usize, usize) {
+    let n = used.len();
     let enough = |k: usize| used[k] >= MIN_DETERMINING;
-    let first = (0..LEVELS).find(|&k| enough(k)).unwrap_or(0);
-    let last = (0..LEVELS).rev().find(|&k| enough(k)).unwrap_or(255);
+    let first = (0..n).find(|&k| enough(k)).unwrap_or(0);
+    let last = (0..n).rev().find(|&k| enough(k)).unwrap_or(n - 1);
     (first, last.max(first))
 }
 
@@ -808,21 +888,22 @@ fn quadratic_coefficients(lo: usize, hi: usize, at: f64) -> Option<Vec<f64>> {
 /// exponentials, which a quadratic in `log U` follows far better than one in `U`), offset to
 /// meet `U(last)`; below, `U` itself is continued the same way (it goes to 0 there). The
 /// result is kept at or above 0 and strictly increasing.
-fn extrapolate(u: &[f64; LEVELS], first: usize, last: usize) -> ([f64; LEVELS], DMatrix<f64>) {
+fn extrapolate(u: &[f64], first: usize, last: usize) -> (Vec<f64>, DMatrix<f64>) {
     extrapolate_with(u, first, last, EXTRAPOLATION_WINDOW)
 }
 
 /// [`extrapolate`] with another window (the extrapolation's sensitivity to it is part of the
 /// standard error).
 fn extrapolate_with(
-    u: &[f64; LEVELS],
+    u: &[f64],
     first: usize,
     last: usize,
     window: usize,
-) -> ([f64; LEVELS], DMatrix<f64>) {
-    let mut out = *u;
-    let mut jac = DMatrix::<f64>::identity(LEVELS, LEVELS);
-    if last < 255 {
+) -> (Vec<f64>, DMatrix<f64>) {
+    let n = u.len();
+    let mut out = u.to_vec();
+    let mut jac = DMatrix::<f64>::identity(n, n);
+    if last < n - 1 {
         let lo = last.saturating_sub(window - 1).max(first);
         let positive = (lo..=last).all(|k| u[k] > 0.0);
         if let (true, true, Some(at_end)) = (
@@ -830,7 +911,7 @@ fn extrapolate_with(
             positive,
             quadratic_coefficients(lo, last, last as f64),
         ) {
-            for k in last + 1..LEVELS {
+            for k in last + 1..n {
                 let Some(ck) = quadratic_coefficients(lo, last, k as f64) else {
                     continue;
                 };
@@ -840,7 +921,7 @@ fn extrapolate_with(
                     lv += (ck[i] - at_end[i]) * u[j].ln();
                 }
                 out[k] = lv.exp();
-                for c in 0..LEVELS {
+                for c in 0..n {
                     jac[(k, c)] = 0.0;
                 }
                 jac[(k, last)] += out[k] / u[last];
@@ -870,7 +951,7 @@ fn extrapolate_with(
                     v += (ck[i] - at_end[i]) * u[j];
                 }
                 out[k] = v;
-                for c in 0..LEVELS {
+                for c in 0..n {
                     jac[(k, c)] = 0.0;
                 }
                 jac[(k, first)] += 1.0;
@@ -883,15 +964,16 @@ fn extrapolate_with(
     for v in out.iter_mut() {
         *v = v.max(0.0);
     }
-    make_monotone(&mut out, &[1.0; LEVELS]);
+    make_monotone(&mut out, &vec![1.0; n]);
     (out, jac)
 }
 
 /// Makes `u` strictly increasing: weighted isotonic regression (pool adjacent violators)
 /// with the information per value as weights, then separation of ties.
-fn make_monotone(u: &mut [f64; LEVELS], weight: &[f64]) {
-    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(LEVELS);
-    for k in 0..LEVELS {
+fn make_monotone(u: &mut [f64], weight: &[f64]) {
+    let n = u.len();
+    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(n);
+    for k in 0..n {
         let w = weight[k].max(1e-12);
         blocks.push((u[k], w, 1));
         while blocks.len() > 1 {
@@ -912,33 +994,32 @@ fn make_monotone(u: &mut [f64; LEVELS], weight: &[f64]) {
             k += 1;
         }
     }
-    let eps = ((u[255] - u[0]).abs() / 255.0).max(1e-9) * 1e-4;
-    for k in 1..LEVELS {
+    let eps = ((u[n - 1] - u[0]).abs() / (n - 1) as f64).max(1e-9) * 1e-4;
+    for k in 1..n {
         if u[k] <= u[k - 1] {
             u[k] = u[k - 1] + eps;
         }
     }
 }
 
-/// The selection range `[lo, hi]` of predicted grey values: at least `z` standard deviations
-/// from the clipping points -0.5 and 254.5.
-fn censor_range(var: &[f64; LEVELS], z: f64) -> (f64, f64) {
-    let lo = (0..LEVELS)
-        .find(|&k| k as f64 - z * var[k].sqrt() >= -0.5)
+/// The selection range `[lo, hi]` of predicted knot positions: at least `z` standard
+/// deviations from the clipping points, half a grey value below 0 and below the top
+/// (`half` is half a grey value in knots).
+fn censor_range(var: &[f64], z: f64, half: f64) -> (f64, f64) {
+    let n = var.len();
+    let top = (n - 1) as f64 - half;
+    let lo = (0..n)
+        .find(|&k| k as f64 - z * var[k].sqrt() >= -half)
         .unwrap_or(0) as f64;
-    let hi = (0..LEVELS)
+    let hi = (0..n)
         .rev()
-        .find(|&k| k as f64 + z * var[k].sqrt() <= 254.5)
-        .unwrap_or(254) as f64;
+        .find(|&k| k as f64 + z * var[k].sqrt() <= top)
+        .unwrap_or(n - 2) as f64;
     (lo, hi.max(lo + 1.0))
 }
 
-fn variance_table(u: &[f64; LEVELS], noise: &NoiseModel) -> [f64; LEVELS] {
-    let mut v = [0.0; LEVELS];
-    for (k, x) in v.iter_mut().enumerate() {
-        *x = noise.variance(u, k as f64);
-    }
-    v
+fn variance_table(u: &[f64], noise: &NoiseModel) -> Vec<f64> {
+    (0..u.len()).map(|k| noise.variance(u, k as f64)).collect()
 }
 
 /// A starting point: a few iterations of the paper's alternation in the energy domain
@@ -946,13 +1027,17 @@ fn variance_table(u: &[f64; LEVELS], noise: &NoiseModel) -> [f64; LEVELS] {
 /// the observations between grey values 8 and 245. It is biased near the ends (selection by
 /// the observed value) but robust from a linear start, which the Newton steps are not for
 /// strongly curved responses (sRGB, log).
-fn initial_response(frames: &[Image<u8>], exposures: &[f64], iterations: usize) -> [f64; LEVELS] {
-    const LO: u8 = 8;
-    const HI: u8 = 245;
-    let mut u = [0.0; LEVELS];
-    for (k, v) in u.iter_mut().enumerate() {
-        *v = k as f64;
-    }
+fn initial_response<T: Sample>(
+    frames: &[Image<T>],
+    levels: Levels,
+    exposures: &[f64],
+    iterations: usize,
+) -> Vec<f64> {
+    let n = levels.knots;
+    let top = (n - 1) as f64;
+    // grey values 8 to 245 of 255, in knots
+    let (lo, hi) = (8.0 * top / 255.0, 245.0 * top / 255.0);
+    let mut u: Vec<f64> = (0..n).map(|k| k as f64).collect();
     let npx = frames[0].data().len();
     let chunk = CHUNK_ROWS * frames[0].width().max(1);
     for _ in 0..iterations {
@@ -960,43 +1045,52 @@ fn initial_response(frames: &[Image<u8>], exposures: &[f64], iterations: usize) 
             .into_par_iter()
             .map(|c| {
                 let start = c * chunk;
-                let n = chunk.min(npx - start);
-                let mut num = vec![0.0f64; n];
-                let mut den = vec![0.0f64; n];
+                let m = chunk.min(npx - start);
+                let mut num = vec![0.0f64; m];
+                let mut den = vec![0.0f64; m];
                 for (f, &t) in frames.iter().zip(exposures) {
-                    for (x, &k) in f.data()[start..start + n].iter().enumerate() {
-                        if (LO..=HI).contains(&k) {
-                            num[x] += t * u[k as usize];
+                    for (x, &k) in f.data()[start..start + m].iter().enumerate() {
+                        let p = levels.pos(k.raw());
+                        if p >= lo && p <= hi {
+                            num[x] += t * interp(&u, p);
                             den[x] += t * t;
                         }
                     }
                 }
-                let mut sum = vec![0.0f64; LEVELS];
-                let mut cnt = vec![0.0f64; LEVELS];
+                let mut sum = vec![0.0f64; n];
+                let mut cnt = vec![0.0f64; n];
                 for (f, &t) in frames.iter().zip(exposures) {
-                    for (x, &k) in f.data()[start..start + n].iter().enumerate() {
-                        if (LO..=HI).contains(&k) && den[x] > 0.0 {
-                            sum[k as usize] += t * num[x] / den[x];
-                            cnt[k as usize] += 1.0;
+                    for (x, &k) in f.data()[start..start + m].iter().enumerate() {
+                        let p = levels.pos(k.raw());
+                        if p >= lo && p <= hi && den[x] > 0.0 {
+                            // the observation at its knot position, shared by the two
+                            // neighbouring knots
+                            let j = (p as usize).min(n - 2);
+                            let f = p - j as f64;
+                            let e = t * num[x] / den[x];
+                            sum[j] += (1.0 - f) * e;
+                            cnt[j] += 1.0 - f;
+                            sum[j + 1] += f * e;
+                            cnt[j + 1] += f;
                         }
                     }
                 }
                 (sum, cnt)
             })
             .collect();
-        let mut sum = vec![0.0f64; LEVELS];
-        let mut cnt = vec![0.0f64; LEVELS];
+        let mut sum = vec![0.0f64; n];
+        let mut cnt = vec![0.0f64; n];
         for (s, c) in &parts {
-            for k in 0..LEVELS {
+            for k in 0..n {
                 sum[k] += s[k];
                 cnt[k] += c[k];
             }
         }
-        let observed: Vec<usize> = (0..LEVELS).filter(|&k| cnt[k] >= 1.0).collect();
+        let observed: Vec<usize> = (0..n).filter(|&k| cnt[k] >= 1.0).collect();
         if observed.len() < 2 {
             break;
         }
-        let mut nu = u;
+        let mut nu = u.clone();
         for &k in &observed {
             nu[k] = sum[k] / cnt[k];
         }
@@ -1010,22 +1104,23 @@ fn initial_response(frames: &[Image<u8>], exposures: &[f64], iterations: usize) 
             prev = k;
         }
         let slope_hi = (nu[last] - nu[first]) / (last - first).max(1) as f64;
-        for j in last + 1..LEVELS {
+        for j in last + 1..n {
             nu[j] = nu[last] + slope_hi * (j - last) as f64;
         }
         for j in (0..first).rev() {
             nu[j] = (nu[j + 1] - nu[first] / first.max(1) as f64).max(0.0);
         }
         make_monotone(&mut nu, &cnt);
-        let s = 255.0 / nu[255].max(1e-12);
-        u = nu.map(|v| v * s);
+        let s = 255.0 / nu[n - 1].max(1e-12);
+        u = nu.iter().map(|v| v * s).collect();
     }
     u
 }
 
 /// The data and settings of one calibration.
-struct Solver<'a> {
-    frames: &'a [Image<u8>],
+struct Solver<'a, T: Sample> {
+    frames: &'a [Image<T>],
+    levels: Levels,
     /// Per frame, the observations dropped next to saturated pixels (a bit per pixel).
     masks: &'a [Vec<u64>],
     exposures: &'a [f64],
@@ -1036,13 +1131,16 @@ struct Solver<'a> {
 
 /// The converged state.
 struct Solution {
-    u: [f64; LEVELS],
+    u: Vec<f64>,
     state: Vec<PixelState>,
     /// The table at which `sums` and `grads` were taken (the one before the last step).
-    u_prev: [f64; LEVELS],
+    u_prev: Vec<f64>,
     noise: NoiseModel,
     lo: f64,
     hi: f64,
+    /// The knot positions between which observations have their full weight (inside the
+    /// taper at each end of the selection).
+    full: (f64, f64),
     /// Prior weight relative to the mean information.
     prior: f64,
     /// The prior's normal matrix of the last step.
@@ -1071,7 +1169,7 @@ const ADAPT_ITERATIONS: usize = 6;
 /// A converged state to restart from, with its frozen noise model and a new selection.
 #[derive(Clone)]
 struct Warm {
-    u: [f64; LEVELS],
+    u: Vec<f64>,
     state: Vec<PixelState>,
     noise: NoiseModel,
     /// Selection in standard deviations from 0 and 255.
@@ -1079,7 +1177,7 @@ struct Warm {
     iterations: usize,
 }
 
-impl Solver<'_> {
+impl<T: Sample> Solver<'_, T> {
     /// Runs the iteration from the paper's alternation's result, or from `warm` with its
     /// noise model frozen.
     fn run(
@@ -1092,8 +1190,9 @@ impl Solver<'_> {
         let (mut u, mut state, mut noise, z, max_iter) = match warm {
             Some(w) => (w.u, w.state, Some(w.noise), w.censor_sigmas, w.iterations),
             None => {
-                let mut u = initial_response(self.frames, self.exposures, INITIAL_ITERATIONS);
-                let g = 128.0 / u[GAUGE].max(1e-12);
+                let mut u =
+                    initial_response(self.frames, self.levels, self.exposures, INITIAL_ITERATIONS);
+                let g = 128.0 / u[gauge(self.levels.knots)].max(1e-12);
                 for v in u.iter_mut() {
                     *v *= g;
                 }
@@ -1114,18 +1213,23 @@ impl Solver<'_> {
                 )
             }
         };
+        let n = self.levels.knots;
+        let top = (n - 1) as f64;
+        // half a grey value, and two 8-bit grey values, in knots
+        let half = 0.5 * self.levels.scale;
+        let two = 2.0 * top / 255.0;
         let mut var = match &noise {
             Some(nm) => variance_table(&u, nm),
-            None => [1.0; LEVELS],
+            None => vec![1.0; n],
         };
         let (mut lo, mut hi) = match &noise {
-            Some(_) => censor_range(&var, z),
-            None => (8.0, 245.0),
+            Some(_) => censor_range(&var, z, half),
+            None => (8.0 * top / 255.0, 245.0 * top / 255.0),
         };
         let (mut e_lo, mut e_hi) = (interp(&u, lo), interp(&u, hi));
         let (mut e_lo_taper, mut e_hi_taper) = (
-            interp(&u, (lo + 2.0).min(hi)),
-            interp(&u, (hi - 2.0).max(lo)),
+            interp(&u, (lo + two).min(hi)),
+            interp(&u, (hi - two).max(lo)),
         );
         let mut prior = prior_weight(&u, self.log_gap, lo, hi, self.options.smoothness);
         let (t_min, t_max) = self
@@ -1144,21 +1248,23 @@ impl Solver<'_> {
             if adapt {
                 if let Some(nm) = &noise {
                     var = variance_table(&u, nm);
-                    (lo, hi) = censor_range(&var, z);
+                    (lo, hi) = censor_range(&var, z, half);
                 }
             }
             if adapt {
                 (e_lo, e_hi) = (interp(&u, lo), interp(&u, hi));
-                // the taper spans one noise standard deviation (at least 2 grey values)
-                let d_lo = var[lo as usize].sqrt().max(2.0);
-                let d_hi = var[hi as usize].sqrt().max(2.0);
+                // the taper spans one noise standard deviation (at least 2 grey values of
+                // 255)
+                let d_lo = var[lo as usize].sqrt().max(two);
+                let d_hi = var[hi as usize].sqrt().max(two);
                 e_lo_taper = interp(&u, (lo + d_lo).min(hi));
                 e_hi_taper = interp(&u, (hi - d_hi).max(lo)).max(e_lo_taper);
                 prior = prior_weight(&u, self.log_gap, lo, hi, self.options.smoothness);
             }
             let model = Model {
                 fwd: Forward::new(&u),
-                var,
+                var: var.clone(),
+                levels: self.levels,
                 lo,
                 hi,
                 e_lo,
@@ -1177,7 +1283,7 @@ impl Solver<'_> {
                 ));
             }
             sums.hess = profiled_hessian(&model, &sums.bins, &sums.diag);
-            let penalty = third_difference_normal() * (prior * median_info(&sums.diag));
+            let penalty = third_difference_normal(n) * (prior * median_info(&sums.diag));
             let lambda = 1.0;
             // the objective (with the prior) decides the damping once the problem is frozen
             let uv = DVector::from_column_slice(&u);
@@ -1191,16 +1297,16 @@ impl Solver<'_> {
             }
             last_objective = objective;
             let mut nu = solve_u_step(&u, &sums, &penalty, lambda, damping)?;
-            let info: Vec<f64> = (0..LEVELS)
-                .map(|k| sums.diag[k] + penalty[(k, k)])
-                .collect();
+            let info: Vec<f64> = (0..n).map(|k| sums.diag[k] + penalty[(k, k)]).collect();
             for v in nu.iter_mut() {
                 // U(0) is the black level: nothing below zero
                 *v = v.max(0.0);
             }
             make_monotone(&mut nu, &info);
-            // the gauge: U(GAUGE) stays (B' scales with U); U(255) = 255 at the end
-            let s = u[GAUGE] / nu[GAUGE];
+            // the gauge: U at the middle knot stays (B' scales with U); U(top) = 255 at the
+            // end
+            let g = gauge(n);
+            let s = u[g] / nu[g];
             for v in nu.iter_mut() {
                 *v *= s;
             }
@@ -1216,7 +1322,7 @@ impl Solver<'_> {
             let delta = (k_first..=k_last)
                 .map(|k| (nu[k] - u[k]).abs())
                 .fold(0.0f64, f64::max)
-                * k_last as f64
+                * (k_last as f64 * 255.0 / top)
                 / nu[k_last].max(1e-12);
             change.push(delta);
             if adapt {
@@ -1236,6 +1342,11 @@ impl Solver<'_> {
         let Some((u_prev, sums, grads, penalty)) = last else {
             return Err(singular());
         };
+        let full = {
+            let fwd = Forward::new(&u);
+            let pos = |e: f64, dflt: f64| fwd.eval(e).map_or(dflt, |(j, f)| j as f64 + f);
+            (pos(e_lo_taper, lo), pos(e_hi_taper, hi))
+        };
         Ok(Solution {
             u,
             state,
@@ -1247,6 +1358,7 @@ impl Solver<'_> {
             }),
             lo,
             hi,
+            full,
             prior,
             penalty,
             sums,
@@ -1258,10 +1370,10 @@ impl Solver<'_> {
     }
 }
 
-/// `u` scaled to `U(255) = 255`.
-fn normalized(u: &[f64; LEVELS]) -> [f64; LEVELS] {
-    let s = 255.0 / u[255];
-    u.map(|v| v * s)
+/// `u` scaled to `U(top) = 255`.
+fn normalized(u: &[f64]) -> Vec<f64> {
+    let s = 255.0 / u[u.len() - 1];
+    u.iter().map(|v| v * s).collect()
 }
 
 /// Standard errors of the normalised table: the sandwich covariance of the last Newton step
@@ -1273,19 +1385,21 @@ fn standard_errors(
     last: usize,
 ) -> Result<(Vec<f64>, Vec<f64>), PhotometricError> {
     let (u, ext) = extrapolate(&sol.u, first, last);
+    let n = u.len();
+    let gauge = gauge(n);
     let penalty = &sol.penalty;
     let (a, _) = u_system(&sol.u_prev, &sol.sums, penalty, 1.0);
     let chol = a.cholesky().ok_or_else(singular)?;
     // meat: centred chunk gradients (GAUGE is held, so its component is zero)
     let c = sol.grads.len();
-    let mut meat = DMatrix::<f64>::zeros(LEVELS, LEVELS);
+    let mut meat = DMatrix::<f64>::zeros(n, n);
     if c >= 2 {
-        let mean: Vec<f64> = (0..LEVELS)
+        let mean: Vec<f64> = (0..n)
             .map(|k| sol.grads.iter().map(|g| g[k]).sum::<f64>() / c as f64)
             .collect();
         for g in &sol.grads {
-            let v = DVector::from_fn(LEVELS, |k, _| {
-                if k == GAUGE && !sol.sums.hess.is_empty() {
+            let v = DVector::from_fn(n, |k, _| {
+                if k == gauge && !sol.sums.hess.is_empty() {
                     0.0
                 } else {
                     g[k] - mean[k]
@@ -1297,11 +1411,11 @@ fn standard_errors(
     }
     let x = chol.solve(&meat);
     let cov = &ext * chol.solve(&x.transpose()) * ext.transpose();
-    // normalisation: U_n = 255 U / U(255); J = 255 / U255 (I - U e_255^T / U255)
-    let s = 255.0 / u[255];
-    let mut jac = DMatrix::<f64>::identity(LEVELS, LEVELS) * s;
-    for k in 0..LEVELS {
-        jac[(k, 255)] -= s * u[k] / u[255];
+    // normalisation: U_n = 255 U / U(top); J = 255 / U_top (I - U e_top^T / U_top)
+    let s = 255.0 / u[n - 1];
+    let mut jac = DMatrix::<f64>::identity(n, n) * s;
+    for k in 0..n {
+        jac[(k, n - 1)] -= s * u[k] / u[n - 1];
     }
     let cov_n = &jac * cov * jac.transpose();
     // the prior's part: the change with a ten times weaker prior
@@ -1309,9 +1423,9 @@ fn standard_errors(
     let (_, b1) = u_system(&sol.u_prev, &sol.sums, penalty, 1.0);
     let d1 = chol.solve(&b1);
     let d10 = a10.cholesky().ok_or_else(singular)?.solve(&b10);
-    let mut u1 = sol.u_prev;
-    let mut u10 = sol.u_prev;
-    for k in 0..LEVELS {
+    let mut u1 = sol.u_prev.clone();
+    let mut u10 = sol.u_prev.clone();
+    for k in 0..n {
         u1[k] += d1[k];
         u10[k] += d10[k];
     }
@@ -1320,25 +1434,69 @@ fn standard_errors(
     // the extrapolation's part: the change with half the window
     let nu = normalized(&u);
     let nh = normalized(&extrapolate_with(&sol.u, first, last, EXTRAPOLATION_WINDOW / 2).0);
-    let prior_part: Vec<f64> = (0..LEVELS)
+    let prior_part: Vec<f64> = (0..n)
         .map(|k| {
             let p = (n10[k] - n1[k]).abs() / 0.9;
             let e = (nh[k] - nu[k]).abs();
             (p * p + e * e).sqrt()
         })
         .collect();
-    let total = (0..LEVELS)
+    let total = (0..n)
         .map(|k| (cov_n[(k, k)].max(0.0) + prior_part[k] * prior_part[k]).sqrt())
         .collect();
     Ok((total, prior_part))
 }
 
 /// Calibrates the inverse response from `frames` (8-bit grey, all the same size) taken at
-/// `exposures_ms`. Frames are modified in place (saturated neighbourhoods set to 255).
-/// `progress` is called after every iteration with the iteration number and the largest
-/// change of `U` in grey levels.
+/// `exposures_ms`. The frames are not changed (the mutable borrow is kept for
+/// compatibility). `progress` is called after every iteration with the iteration number and
+/// the largest change of `U` in grey levels (on the `U(255) = 255` scale).
 pub fn calibrate_response(
     frames: &mut [Image<u8>],
+    exposures_ms: &[f64],
+    options: &ResponseOptions,
+    progress: &(dyn Fn(usize, f64) + Sync),
+) -> Result<ResponseCalibration, PhotometricError> {
+    calibrate(frames, Levels::new(8), exposures_ms, options, progress)
+}
+
+/// Calibrates the `2^bits`-value inverse response of a sensor deeper than 8 bits (`bits`
+/// from 8 to 16) from frames whose samples hold `bits`-bit values in the low bits
+/// (`0 ..= 2^bits - 1`; a 12-bit sensor's 16-bit PNG has values up to 4095). The estimate is
+/// taken on `min(2^bits, MAX_KNOTS)` equally spaced knots and interpolated linearly to every
+/// value: with many values each observed rarely, the knots pool neighbouring values, and
+/// the third-difference prior works on the knots as on the 256 values of an 8-bit frame.
+/// All grey values in the result (`observed_range`, `filled`, `histogram`, `censor_range`,
+/// `rmse`) are on the frames' own scale; `U(2^bits - 1) = 255`.
+///
+/// A sample above `2^bits - 1` is an error naming the frame and the value (values in the
+/// high bits of a 16-bit sample have bit depth 16, or must be shifted down first).
+pub fn calibrate_response_deep(
+    frames: &[Image<u16>],
+    bits: u32,
+    exposures_ms: &[f64],
+    options: &ResponseOptions,
+    progress: &(dyn Fn(usize, f64) + Sync),
+) -> Result<ResponseCalibration, PhotometricError> {
+    if !(8..=16).contains(&bits) {
+        return Err(PhotometricError::BitDepth(bits));
+    }
+    let levels = Levels::new(bits);
+    for (i, f) in frames.iter().enumerate() {
+        if let Some(&v) = f.data().iter().find(|&&v| v as u32 > levels.top) {
+            return Err(PhotometricError::Calibration(format!(
+                "frame {i} has the value {v}, more than a {bits}-bit sample holds (at most {}); if the values are in the high bits of the 16-bit samples, shift them down or use bit depth 16",
+                levels.top
+            )));
+        }
+    }
+    calibrate(frames, levels, exposures_ms, options, progress)
+}
+
+/// [`calibrate_response`] and [`calibrate_response_deep`] on frames of any sample type.
+fn calibrate<T: Sample>(
+    frames: &[Image<T>],
+    levels: Levels,
     exposures_ms: &[f64],
     options: &ResponseOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
@@ -1391,47 +1549,59 @@ pub fn calibrate_response(
         .windows(2)
         .map(|p| (p[1] / p[0]).ln())
         .fold(0.0f64, f64::max);
-    let frames: &[Image<u8>] = frames;
+    let nk = levels.knots;
+    let top = levels.top;
+    // 8-bit grey values as knot indices
+    let at = |g: usize| g * (nk - 1) / 255;
     let masks: Vec<Vec<u64>> = frames
         .par_iter()
-        .map(|f| saturation_mask(f.data(), w, h, options.saturation_border))
+        .map(|f| saturation_mask(f.data(), top, w, h, options.saturation_border))
         .collect();
 
     let histogram: Vec<u64> = {
         let parts: Vec<Vec<u64>> = frames
             .par_iter()
             .map(|f| {
-                let mut c = vec![0u64; LEVELS];
+                let mut c = vec![0u64; top as usize + 1];
                 for &v in f.data() {
-                    c[v as usize] += 1;
+                    c[(v.raw() as usize).min(top as usize)] += 1;
                 }
                 c
             })
             .collect();
-        let mut total = vec![0u64; LEVELS];
+        let mut total = vec![0u64; top as usize + 1];
         for p in parts {
-            for k in 0..LEVELS {
-                total[k] += p[k];
+            for (t, c) in total.iter_mut().zip(&p) {
+                *t += c;
             }
         }
         total
     };
+    // counts per knot (nearest), for the checks in 8-bit grey values
+    let mut knot_hist = vec![0u64; nk];
+    for (v, &c) in histogram.iter().enumerate() {
+        knot_hist[levels.knot(v as u32)] += c;
+    }
     let min_count = options.min_count.max(1);
-    let lo_obs = (0..255).find(|&k| histogram[k] >= min_count);
-    let hi_obs = (0..255).rev().find(|&k| histogram[k] >= min_count);
+    let lo_obs = (0..nk - 1).find(|&k| knot_hist[k] >= min_count);
+    let hi_obs = (0..nk - 1).rev().find(|&k| knot_hist[k] >= min_count);
     let (Some(lo_obs), Some(hi_obs)) = (lo_obs, hi_obs) else {
         return Err(PhotometricError::Calibration(
             "no unsaturated pixel in any frame".into(),
         ));
     };
-    if hi_obs - lo_obs < 16 {
+    let grey = |k: usize| (k as f64 / levels.scale).round() as u32;
+    if hi_obs - lo_obs < at(16) {
         return Err(PhotometricError::Calibration(format!(
-            "only grey values {lo_obs}..{hi_obs} are observed; the scene needs a wider range of brightness (dark pixels and bright ones)"
+            "only grey values {}..{} are observed; the scene needs a wider range of brightness (dark pixels and bright ones)",
+            grey(lo_obs),
+            grey(hi_obs)
         )));
     }
 
     let solver = Solver {
         frames,
+        levels,
         masks: &masks,
         exposures: exposures_ms,
         options,
@@ -1441,39 +1611,48 @@ pub fn calibrate_response(
 
     // what the data determine
     let used = sol.sums.used.clone();
-    let determined: Vec<bool> = (0..LEVELS)
+    let determined: Vec<bool> = (0..nk)
         .map(|k| {
             let a = k.saturating_sub(1);
-            let b = (k + 1).min(255);
+            let b = (k + 1).min(nk - 1);
             (a..=b).map(|j| used[j]).sum::<u64>() >= min_count
         })
         .collect();
-    let k_lo = (0..LEVELS).find(|&k| determined[k]).unwrap_or(0);
-    let k_hi = (0..LEVELS).rev().find(|&k| determined[k]).unwrap_or(255);
-    let filled: Vec<u8> = (0..LEVELS)
-        .filter(|&k| !determined[k])
-        .map(|k| k as u8)
-        .collect();
-    if k_hi < 192 {
+    // determined: enough observations, and inside the taper, where they have their full
+    // weight (in the taper the prior and the extrapolation share the say)
+    let (full_lo, full_hi) = (sol.full.0.ceil() as usize, sol.full.1.floor() as usize);
+    let k_lo = (0..nk)
+        .find(|&k| determined[k] && k >= full_lo)
+        .unwrap_or(0);
+    let k_hi = (0..nk)
+        .rev()
+        .find(|&k| determined[k] && k <= full_hi)
+        .unwrap_or(nk - 1);
+    // the grey values between the knots the data determine
+    let (g_lo, g_hi) = (grey(k_lo), grey(k_hi));
+    let filled: Vec<u32> = (0..=top).filter(|&v| v < g_lo || v > g_hi).collect();
+    let s_hi = 250.0 * f64::from(top) / 255.0;
+    if k_hi < at(192) {
         return Err(PhotometricError::Calibration(format!(
-            "the data determine U only up to grey value {k_hi}: no pixel is predicted brighter without saturating; record longer exposures or a brighter scene so that grey values up to about 250 are observed"
+            "the data determine U only up to grey value {g_hi} of {top}: no pixel is predicted brighter without saturating; record longer exposures or a brighter scene so that grey values up to about {} are observed",
+            s_hi.round()
         )));
     }
-    if k_lo > 64 {
+    if k_lo > at(64) {
         return Err(PhotometricError::Calibration(format!(
-            "the data determine U only from grey value {k_lo} up: record shorter exposures or a darker scene so that grey values near 0 are observed"
+            "the data determine U only from grey value {g_lo} up: record shorter exposures or a darker scene so that grey values near 0 are observed"
         )));
     }
     let mut warnings = Vec::new();
-    if k_hi < 240 {
+    if k_hi < at(240) {
         warnings.push(format!(
-            "U above grey value {k_hi} is extrapolated ({} values): longer exposures would determine it",
-            255 - k_hi
+            "U above grey value {g_hi} is extrapolated ({} values): longer exposures would determine it",
+            top - g_hi
         ));
     }
-    if k_lo > 16 {
+    if k_lo > at(16) {
         warnings.push(format!(
-            "U below grey value {k_lo} is extrapolated: shorter exposures would determine it"
+            "U below grey value {g_lo} is extrapolated: shorter exposures would determine it"
         ));
     }
     if distinct.len() < 8 {
@@ -1494,11 +1673,11 @@ pub fn calibrate_response(
     // the ends' dependence on where the selection cuts: the estimate with the cut one noise
     // standard deviation further in and further out (restarted from the estimate)
     let base = normalized(&extrapolate(&sol.u, first, last).0);
-    let mut cut_part = vec![0.0f64; LEVELS];
+    let mut cut_part = vec![0.0f64; nk];
     for dz in [-1.0, 1.0] {
         let alt = solver.run(
             Some(Warm {
-                u: sol.u,
+                u: sol.u.clone(),
                 state: sol.state.clone(),
                 noise: sol.noise,
                 censor_sigmas: (options.censor_sigmas + dz).max(0.5),
@@ -1508,7 +1687,7 @@ pub fn calibrate_response(
         )?;
         let (f2, l2) = data_range(&alt.sums.used);
         let other = normalized(&extrapolate(&alt.u, f2, l2).0);
-        for k in 0..LEVELS {
+        for k in 0..nk {
             cut_part[k] = cut_part[k].max((other[k] - base[k]).abs());
         }
     }
@@ -1516,19 +1695,28 @@ pub fn calibrate_response(
     // twice the combined estimate with a floor of 0.1% of U (on synthetic sweeps across
     // responses, noise levels, JPEG and 12 to 120 exposures this holds about 93% of the true
     // errors within two standard errors; `cargo xtask response-study`)
-    for k in 0..LEVELS {
+    for k in 0..nk {
         let systematic = prior_error[k].hypot(cut_part[k]);
         let total = std_error[k].hypot(cut_part[k]);
         prior_error[k] = UNCERTAINTY_FACTOR * systematic;
         std_error[k] = (UNCERTAINTY_FACTOR * total).hypot(UNCERTAINTY_FLOOR * base[k]);
-        if k == 255 {
+        if k == nk - 1 {
             std_error[k] = 0.0;
             prior_error[k] = 0.0;
         }
     }
-    let response = InverseResponse::new(normalized(&extrapolate(&sol.u, first, last).0))?;
-    let rmse =
-        (sol.sums.rss.iter().sum::<f64>() / sol.sums.cnt.iter().sum::<f64>().max(1.0)).sqrt();
+    let knots_u = normalized(&extrapolate(&sol.u, first, last).0);
+    // every grey value of the frames from the knots
+    let (table, std_error, prior_error) = if nk == top as usize + 1 {
+        (knots_u, std_error, prior_error)
+    } else {
+        let all = |v: &[f64]| -> Vec<f64> { (0..=top).map(|g| interp(v, levels.pos(g))).collect() };
+        (all(&knots_u), all(&std_error), all(&prior_error))
+    };
+    let response = InverseResponse::from_values(table)?;
+    let rmse = (sol.sums.rss.iter().sum::<f64>() / sol.sums.cnt.iter().sum::<f64>().max(1.0))
+        .sqrt()
+        / levels.scale;
     Ok(ResponseCalibration {
         response,
         std_error,
@@ -1537,11 +1725,12 @@ pub fn calibrate_response(
         converged: sol.converged,
         change: sol.change,
         rmse,
-        observed_range: (k_lo as u8, k_hi as u8),
+        observed_range: (g_lo, g_hi),
         filled,
         histogram,
         used,
-        censor_range: (sol.lo, sol.hi),
+        censor_range: (sol.lo / levels.scale, sol.hi / levels.scale),
+        knot_step: 1.0 / levels.scale,
         noise: sol.noise,
         prior_weight: sol.prior,
         pixels_used: sol.sums.pixels,

@@ -6,5 +6,6 @@ mod exposure;
 mod files;
 mod marker;
 mod response;
+mod response_deep;
 mod serde_types;
 mod vignette;

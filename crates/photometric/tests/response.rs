@@ -6,7 +6,14 @@ use synthetic::camera::ResponseCurve;
 use synthetic::scene::{Sweep, SweepConfig};
 use synthetic::sensor::{NoiseLevel, Sensor};
 
-fn sweep(seed: u64, w: usize, h: usize, n: usize, sensor: Sensor, curve: ResponseCurve) -> Sweep {
+pub(crate) fn sweep(
+    seed: u64,
+    w: usize,
+    h: usize,
+    n: usize,
+    sensor: Sensor,
+    curve: ResponseCurve,
+) -> Sweep {
     Sweep::new(
         seed,
         SweepConfig {

@@ -159,6 +159,15 @@ impl ResponseCurve {
         raw(x) / raw(1.0)
     }
 
+    /// The table `U(0) .. U(2^bits - 1)` of a `bits`-bit sensor (1 to 16), scaled to
+    /// `U(2^bits - 1) = 255`: the same curve at a finer step.
+    pub fn table_bits(self, bits: u32) -> Vec<f64> {
+        let top = ((1u32 << bits.clamp(1, 16)) - 1) as f64;
+        (0..=top as u32)
+            .map(|k| 255.0 * self.inverse(k as f64 / top))
+            .collect()
+    }
+
     /// The table `U(0) .. U(255)`, scaled to `U(255) = 255`.
     pub fn table(self) -> [f64; 256] {
         let mut u = [0.0; 256];
@@ -208,16 +217,18 @@ impl FromStr for ResponseCurve {
     }
 }
 
-/// The camera response `G = U^-1` as a continuous value in `[0, 255]` (before noise and
-/// quantisation): linear interpolation of the inverse of `u`.
-pub fn response_value(u: &[f64; 256], energy: f64) -> f64 {
+/// The camera response `G = U^-1` as a continuous value in `[0, n - 1]` for a table of `n`
+/// values (`[0, 255]` for 8 bits; before noise and quantisation): linear interpolation of
+/// the inverse of `u`.
+pub fn response_value(u: &[f64], energy: f64) -> f64 {
+    let top = u.len() - 1;
     if energy <= u[0] {
         return 0.0;
     }
-    if energy >= u[255] {
-        return 255.0;
+    if energy >= u[top] {
+        return top as f64;
     }
-    let k = u.partition_point(|&x| x <= energy).clamp(1, 255);
+    let k = u.partition_point(|&x| x <= energy).clamp(1, top);
     let (a, b) = (u[k - 1], u[k]);
     (k - 1) as f64 + (energy - a) / (b - a)
 }

@@ -431,6 +431,8 @@ pub struct Sweep {
     pub response: [f64; 256],
     /// The sensor.
     pub sensor: Sensor,
+    /// The true response curve (for deeper tables, [`Sweep::response_bits`]).
+    pub curve: ResponseCurve,
     seed: u64,
 }
 
@@ -474,6 +476,7 @@ impl Sweep {
             exposures_ms,
             response: config.response.table(),
             sensor: config.sensor,
+            curve: config.response,
             seed,
         }
     }
@@ -483,6 +486,27 @@ impl Sweep {
         let t = self.exposures_ms[i];
         self.sensor.capture(
             &self.response,
+            self.width,
+            self.height,
+            t,
+            self.seed ^ 0xABCD ^ (i as u64) << 20,
+            |x, y| t * self.irradiance[y * self.width + x],
+        )
+    }
+
+    /// The ground-truth inverse response of a `bits`-bit sensor (`2^bits` values,
+    /// `U(2^bits - 1) = 255`).
+    pub fn response_bits(&self, bits: u32) -> Vec<f64> {
+        self.curve.table_bits(bits)
+    }
+
+    /// Frame `i` of a `bits`-bit sensor (8 to 16): values `0 ..= 2^bits - 1` in 16-bit
+    /// samples, stored losslessly (see [`Sensor::capture_deep`]). With 8 bits it is
+    /// [`Sweep::render`] widened.
+    pub fn render_deep(&self, i: usize, bits: u32) -> Vec<u16> {
+        let t = self.exposures_ms[i];
+        self.sensor.capture_deep(
+            &self.response_bits(bits),
             self.width,
             self.height,
             t,

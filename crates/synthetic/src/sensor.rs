@@ -219,10 +219,14 @@ impl Sensor {
     /// One noisy observation of a working pixel: the grey value (before compression) for the
     /// expected linear signal `energy` (U-units), with the inverse response `u`.
     pub fn observe(&self, u: &[f64; 256], energy: f64, rng: &mut Rng) -> u8 {
-        self.observe_with_dark(u, energy, 0.0, rng)
+        self.observe_with_dark(u, energy, 0.0, rng) as u8
     }
 
-    fn observe_with_dark(&self, u: &[f64; 256], energy: f64, dark_e: f64, rng: &mut Rng) -> u8 {
+    /// The grey value `0 ..= u.len() - 1` of one observation; `u` has `2^k` values with
+    /// `U(top) = 255`. The ADC noise is the same fraction of the full scale at every bit
+    /// depth: a deeper sensor differs from an 8-bit one by its finer quantisation only.
+    fn observe_with_dark(&self, u: &[f64], energy: f64, dark_e: f64, rng: &mut Rng) -> u32 {
+        let top = (u.len() - 1) as f64;
         let linear = if self.full_well.is_finite() {
             let mean_e = energy.max(0.0) * self.full_well / 255.0 + dark_e;
             let electrons = poisson(mean_e, rng) + self.read_noise * rng.normal();
@@ -230,8 +234,8 @@ impl Sensor {
         } else {
             energy.clamp(0.0, 255.0)
         };
-        let grey = response_value(u, linear) + self.adc_noise * rng.normal();
-        grey.round().clamp(0.0, 255.0) as u8
+        let grey = response_value(u, linear) + self.adc_noise * (top / 255.0) * rng.normal();
+        grey.round().clamp(0.0, top) as u32
     }
 
     /// Standard deviation of a working pixel's grey value for the expected signal `energy`
@@ -263,14 +267,51 @@ impl Sensor {
         frame_seed: u64,
         energy: impl Fn(usize, usize) -> f64 + Sync,
     ) -> Vec<u8> {
-        let mut out = vec![0u8; width * height];
+        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| {
+            v as u8
+        })
+    }
+
+    /// [`Sensor::capture`] for a sensor of `bits` bits (8 to 16): the values `0 ..= 2^bits -
+    /// 1` in the low bits of 16-bit samples, with the inverse response `u` of `2^bits` values
+    /// (`U(2^bits - 1) = 255`, for example [`crate::camera::ResponseCurve::table_bits`]).
+    /// Full well, shot, read and ADC noise (as a fraction of the full scale) are those of
+    /// the 8-bit sensor; the quantisation is finer. Deep frames are stored losslessly (16-bit
+    /// PNG): the JPEG quality does not apply to them.
+    pub fn capture_deep(
+        &self,
+        u: &[f64],
+        width: usize,
+        height: usize,
+        exposure_ms: f64,
+        frame_seed: u64,
+        energy: impl Fn(usize, usize) -> f64 + Sync,
+    ) -> Vec<u16> {
+        self.capture_levels(u, width, height, exposure_ms, frame_seed, energy, |v| {
+            v as u16
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn capture_levels<T: Copy + Default + Send>(
+        &self,
+        u: &[f64],
+        width: usize,
+        height: usize,
+        exposure_ms: f64,
+        frame_seed: u64,
+        energy: impl Fn(usize, usize) -> f64 + Sync,
+        to_sample: impl Fn(u32) -> T + Sync,
+    ) -> Vec<T> {
+        let top = (u.len() - 1) as u32;
+        let mut out = vec![T::default(); width * height];
         out.par_chunks_mut(width.max(1))
             .enumerate()
             .for_each(|(y, row)| {
                 let mut rng = Rng::derive(frame_seed, y as u64);
                 for (x, px) in row.iter_mut().enumerate() {
                     let e = energy(x, y);
-                    *px = match self.defect(x, y) {
+                    *px = to_sample(match self.defect(x, y) {
                         Defect::None => self.observe_with_dark(u, e, 0.0, &mut rng),
                         Defect::Hot => self.observe_with_dark(
                             u,
@@ -278,9 +319,9 @@ impl Sensor {
                             self.hot_current * exposure_ms.max(0.0),
                             &mut rng,
                         ),
-                        Defect::StuckHigh => 255,
+                        Defect::StuckHigh => top,
                         Defect::Dead => 0,
-                    };
+                    });
                 }
             });
         out

@@ -131,6 +131,13 @@ pub struct ResponseArgs {
     /// Plot U with its 2-sigma band, the standard errors and the observations (.png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// Bits per sample of 16-bit frames (8 to 16). Default: the fewest bits that hold the
+    /// brightest value (a 12-bit sensor's values 0..4095 give 12). Values in the low bits
+    /// are used as they are; when every value is a multiple of 2^(16-K) and some exceed
+    /// 2^K - 1, the sensor's K bits are in the high bits and are shifted down (as the
+    /// trueBitDepth option of the 16-bit forks of the authors' tools reads them).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bit_depth: Option<u32>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -303,8 +310,9 @@ fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Reads every frame of a sequence with its exposure; errors when exposures are missing.
-pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
+/// Reads every frame of a sequence at its own bit depth with its exposure; errors when
+/// exposures are missing.
+fn load_exposed_native(seq: &Sequence) -> Result<(Vec<dataset_io::GrayImage>, Vec<f64>)> {
     if let Some((k, line)) = seq.times().first_unknown_exposure() {
         bail!(
             "{}: line {line}: the exposure of frame {k} is unknown (0 or missing); calibration needs the exposure time of every frame (third column, > 0)",
@@ -315,7 +323,7 @@ pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)>
     let pb = progress::bar(idx.len() as u64, "decoding", "frames");
     let mut frames = Vec::with_capacity(idx.len());
     let mut exposures = Vec::with_capacity(idx.len());
-    seq.process(
+    seq.process_native(
         &idx,
         rayon::current_num_threads() * 4,
         |f| {
@@ -332,8 +340,93 @@ pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)>
     Ok((frames, exposures))
 }
 
-/// What the sweep offers before calibrating: exposures and grey values.
-fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
+/// The frames of `seq` (read by [`load_exposed_native`]) as one sample type; a frame of the
+/// other depth is an error naming it.
+fn same_depth<T>(
+    seq: &Sequence,
+    frames: Vec<dataset_io::GrayImage>,
+    pick: impl Fn(dataset_io::GrayImage) -> Option<Image<T>>,
+) -> Result<Vec<Image<T>>> {
+    let bits = seq.bits_per_sample();
+    frames
+        .into_iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let other = f.bits();
+            pick(f).with_context(|| {
+                format!(
+                    "{}: a {other}-bit frame in a {bits}-bit sequence",
+                    seq.names()[i]
+                )
+            })
+        })
+        .collect()
+}
+
+/// Reads every frame of an 8-bit sequence with its exposure; errors when exposures are
+/// missing.
+pub fn load_exposed_frames(seq: &Sequence) -> Result<(Vec<Image<u8>>, Vec<f64>)> {
+    let (frames, exposures) = load_exposed_native(seq)?;
+    let frames = same_depth(seq, frames, |f| match f {
+        dataset_io::GrayImage::U8(i) => Some(i),
+        dataset_io::GrayImage::U16(_) => None,
+    })?;
+    Ok((frames, exposures))
+}
+
+/// Reads every frame of a 16-bit sequence with its exposure, with the values as `bits`-bit
+/// samples (see [`deep_layout`]); returns the frames, exposures and bit depth.
+pub fn load_exposed_deep_frames(
+    seq: &Sequence,
+    bit_depth: Option<u32>,
+) -> Result<(Vec<Image<u16>>, Vec<f64>, u32)> {
+    let (frames, exposures) = load_exposed_native(seq)?;
+    let mut frames = same_depth(seq, frames, |f| match f {
+        dataset_io::GrayImage::U16(i) => Some(i),
+        dataset_io::GrayImage::U8(_) => None,
+    })?;
+    let (bits, shift) = deep_layout(&frames, bit_depth)?;
+    if shift > 0 {
+        crate::warn(format_args!(
+            "the {bits}-bit values are in the high bits of the 16-bit samples (every value is a multiple of {}); shifted down by {shift} bits",
+            1u32 << shift
+        ));
+        for f in &mut frames {
+            for v in f.data_mut() {
+                *v >>= shift;
+            }
+        }
+    }
+    Ok((frames, exposures, bits))
+}
+
+/// The bit depth of 16-bit frames and the shift that brings their values to the low bits:
+/// `bit_depth` or the fewest bits (at least 8) that hold the brightest value, and a shift
+/// when the given depth's values sit in the high bits.
+pub fn deep_layout(frames: &[Image<u16>], bit_depth: Option<u32>) -> Result<(u32, u32)> {
+    let (max, or) = frames.iter().fold((0u16, 0u16), |(m, o), f| {
+        f.data().iter().fold((m, o), |(m, o), &v| (m.max(v), o | v))
+    });
+    let needed = (16 - max.leading_zeros()).max(8);
+    let Some(k) = bit_depth else {
+        return Ok((needed, 0));
+    };
+    if needed <= k {
+        return Ok((k, 0));
+    }
+    let shift = 16 - k;
+    if or & ((1u16 << shift) - 1) == 0 {
+        return Ok((k, shift));
+    }
+    bail!(
+        "--bit-depth {k}: the frames have the value {max}, more than {k} bits hold (at most {}), and their low bits are not all zero (so the values are not {k}-bit values in the high bits either); the frames need at least {needed} bits",
+        (1u32 << k) - 1
+    )
+}
+
+/// What the sweep offers before calibrating: exposures and grey values (`top` is the
+/// saturated value, 255 for 8-bit frames).
+fn sweep_report<T: Copy + Into<u32>>(frames: &[Image<T>], top: u32, exposures: &[f64]) -> String {
     let mut sorted: Vec<f64> = exposures.to_vec();
     sorted.sort_by(f64::total_cmp);
     sorted.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
@@ -341,15 +434,16 @@ fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
         .windows(2)
         .map(|p| p[1] / p[0])
         .fold(1.0f64, f64::max);
-    let mut hist = [0u64; 256];
+    let top = top as usize;
+    let mut hist = vec![0u64; top + 1];
     for f in frames {
         for &v in f.data() {
-            hist[v as usize] += 1;
+            hist[(v.into() as usize).min(top)] += 1;
         }
     }
     let total: u64 = hist.iter().sum();
-    let lo = (0..256).find(|&k| hist[k] > 0).unwrap_or(0);
-    let hi = (0..255).rev().find(|&k| hist[k] > 0).unwrap_or(0);
+    let lo = (0..=top).find(|&k| hist[k] > 0).unwrap_or(0);
+    let hi = (0..top).rev().find(|&k| hist[k] > 0).unwrap_or(0);
     let rare = (lo..=hi).filter(|&k| hist[k] < 100).count();
     format!(
         "{} frames, {} exposures from {:.4} to {:.4} ms (largest step x{:.3}); grey values {lo}..{hi} observed ({} of them fewer than 100 times), {:.2}% of the observations saturated",
@@ -359,7 +453,7 @@ fn sweep_report(frames: &[Image<u8>], exposures: &[f64]) -> String {
         sorted.last().copied().unwrap_or(0.0),
         step,
         rare,
-        100.0 * hist[255] as f64 / total.max(1) as f64
+        100.0 * hist[top] as f64 / total.max(1) as f64
     )
 }
 
@@ -380,19 +474,42 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
             seq.len()
         );
     }
-    let (mut frames, exposures) = load_exposed_frames(&seq)?;
-    let report = sweep_report(&frames, &exposures);
-    if !a.json {
-        outln!("{report}")?;
-    }
     let pb = progress::spinner("calibrating");
-    let cal = calibrate_response(&mut frames, &exposures, &opts, &|i, change| {
+    let tick = |i: usize, change: f64| {
         pb.set_message(format!(
             "iteration {i}, U changed by {change:.4} grey values"
         ));
         pb.tick();
-    })
-    .with_context(|| format!("{}", a.sequence.display()))?;
+    };
+    let (cal, nframes) = if seq.bits_per_sample() == 16 {
+        let (frames, exposures, bits) = load_exposed_deep_frames(&seq, a.bit_depth)?;
+        if !a.json {
+            outln!("{}", sweep_report(&frames, (1u32 << bits) - 1, &exposures))?;
+            outln!(
+                "{bits}-bit frames: U is estimated on {} knots and written as {} values",
+                (1usize << bits).min(photometric::MAX_KNOTS),
+                1u32 << bits
+            )?;
+        }
+        let cal = photometric::calibrate_response_deep(&frames, bits, &exposures, &opts, &tick)
+            .with_context(|| format!("{}", a.sequence.display()))?;
+        (cal, frames.len())
+    } else {
+        if let Some(k) = a.bit_depth.filter(|&k| k != 8) {
+            bail!(
+                "--bit-depth {k}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames",
+                a.sequence.display()
+            );
+        }
+        let (mut frames, exposures) = load_exposed_frames(&seq)?;
+        let report = sweep_report(&frames, 255, &exposures);
+        if !a.json {
+            outln!("{report}")?;
+        }
+        let cal = calibrate_response(&mut frames, &exposures, &opts, &tick)
+            .with_context(|| format!("{}", a.sequence.display()))?;
+        (cal, frames.len())
+    };
     pb.finish_and_clear();
     for w in &cal.warnings {
         crate::warn(format_args!("{w}"));
@@ -408,7 +525,8 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     if let Some(p) = &a.plot {
         response_figure(&cal, None, p)?;
     }
-    let max_std = cal.std_error[..255].iter().copied().fold(0.0, f64::max);
+    let top = cal.std_error.len() - 1;
+    let max_std = cal.std_error[..top].iter().copied().fold(0.0, f64::max);
     if a.json {
         outln!(
             "{}",
@@ -416,7 +534,9 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "output": a.output.display().to_string(),
                 "std_output": std_path.display().to_string(),
                 "plot": a.plot.as_ref().map(|p| p.display().to_string()),
-                "frames": frames.len(),
+                "frames": nframes,
+                "bits": cal.response.bits(),
+                "knot_step": cal.knot_step,
                 "iterations": cal.iterations,
                 "converged": cal.converged,
                 "change": cal.change,
@@ -428,7 +548,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
                 "prior_weight": cal.prior_weight,
                 "pixels_used": cal.pixels_used,
-                "u": cal.response.values().to_vec(),
+                "u": cal.response.table(),
                 "std_error": cal.std_error,
                 "systematic_error": cal.systematic_error,
                 "histogram": cal.histogram,
@@ -464,62 +584,64 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
 }
 
 /// Plots U with its 2-sigma band (and the truth, when known), the standard errors, and the
-/// observations per grey value.
+/// observations per grey value, for a table of any bit depth (`truth` has as many values).
 pub fn response_figure(
     cal: &photometric::ResponseCalibration,
-    truth: Option<&[f64; 256]>,
+    truth: Option<&[f64]>,
     path: &Path,
 ) -> Result<()> {
-    let u = cal.response.values();
+    let u = cal.response.table();
+    let n = u.len();
+    let top = (n - 1) as f64;
     let sd = &cal.std_error;
+    // at most about 1024 points per curve
+    let stride = (n / 1024).max(1);
+    let idx: Vec<usize> = (0..n).step_by(stride).chain([n - 1]).collect();
+    let below_top: Vec<usize> = idx.iter().copied().filter(|&k| k < n - 1).collect();
+    let curve = |ks: &[usize], f: &dyn Fn(usize) -> f64| -> Vec<[f64; 2]> {
+        ks.iter().map(|&k| [k as f64, f(k)]).collect()
+    };
+    let scale = format!("U({}) = 255", n - 1);
     let mut c1 = Chart::new(
         "inverse response U",
         "grey value I",
-        "U(I) (scaled to U(255) = 255)",
+        format!("U(I) (scaled to {scale})"),
     );
     c1.legend = Some(Corner::TopLeft);
-    c1.x_range = Some([0.0, 255.0]);
+    c1.x_range = Some([0.0, top]);
     c1.series.push(Series::band(
         "2-sigma band",
-        (0..256).map(|k| [k as f64, u[k] - 2.0 * sd[k]]).collect(),
-        (0..256).map(|k| [k as f64, u[k] + 2.0 * sd[k]]).collect(),
+        curve(&idx, &|k| u[k] - 2.0 * sd[k]),
+        curve(&idx, &|k| u[k] + 2.0 * sd[k]),
         PALETTE[0],
     ));
     c1.series.push(Series::line(
         "U estimated",
-        (0..256).map(|k| [k as f64, u[k]]).collect(),
+        curve(&idx, &|k| u[k]),
         PALETTE[0],
     ));
     if let Some(t) = truth {
-        c1.series.push(
-            Series::line(
-                "U true",
-                (0..256).map(|k| [k as f64, t[k]]).collect(),
-                PALETTE[2],
-            )
-            .dashed(),
-        );
+        c1.series
+            .push(Series::line("U true", curve(&idx, &|k| t[k]), PALETTE[2]).dashed());
     }
     c1.series
-        .push(Series::line("linear", vec![[0.0, 0.0], [255.0, 255.0]], PALETTE[7]).dashed());
+        .push(Series::line("linear", vec![[0.0, 0.0], [top, 255.0]], PALETTE[7]).dashed());
     let mut c2 = Chart::new(
         "uncertainty of U",
         "grey value I",
-        "grey values (U(255) = 255 scale)",
+        format!("grey values ({scale} scale)"),
     );
     c2.legend = Some(Corner::TopLeft);
-    c2.x_range = Some([0.0, 255.0]);
+    c2.x_range = Some([0.0, top]);
     c2.series.push(Series::line(
         "standard error",
-        (0..255).map(|k| [k as f64, sd[k]]).collect(),
+        curve(&below_top, &|k| sd[k]),
         PALETTE[0],
     ));
     c2.series.push(
         Series::line(
             "its systematic part",
-            (0..255)
-                .map(|k| [k as f64, cal.systematic_error[k]])
-                .collect(),
+            curve(&below_top, &|k| cal.systematic_error[k]),
             PALETTE[3],
         )
         .dashed(),
@@ -527,7 +649,7 @@ pub fn response_figure(
     if let Some(t) = truth {
         c2.series.push(Series::line(
             "|U - U true|",
-            (0..255).map(|k| [k as f64, (u[k] - t[k]).abs()]).collect(),
+            curve(&below_top, &|k| (u[k] - t[k]).abs()),
             PALETTE[2],
         ));
     }
@@ -537,25 +659,34 @@ pub fn response_figure(
         "log10 of the number of observations",
     );
     c3.legend = Some(Corner::TopRight);
-    c3.x_range = Some([0.0, 255.0]);
-    let steps = |h: &[u64]| -> Vec<[f64; 2]> {
-        h.iter()
-            .take(255)
+    c3.x_range = Some([0.0, top]);
+    // counts in bins of `width` grey values (below the top value), as steps
+    let steps = |h: &[u64], width: f64| -> Vec<[f64; 2]> {
+        let group = ((n / 256).max(1) as f64 / width).round().max(1.0) as usize;
+        let last = ((top / width).ceil() as usize).min(h.len());
+        h[..last]
+            .chunks(group)
             .enumerate()
-            .flat_map(|(k, &c)| {
-                let v = (c as f64).max(1.0).log10();
-                [[k as f64, v], [k as f64 + 1.0, v]]
+            .flat_map(|(i, c)| {
+                let v = (c.iter().sum::<u64>() as f64).max(1.0).log10();
+                let x0 = (i * group) as f64 * width;
+                [[x0, v], [(x0 + group as f64 * width).min(top), v]]
             })
             .collect()
     };
+    let per = if n > 256 {
+        format!(" (per {} values)", n / 256)
+    } else {
+        String::new()
+    };
     c3.series.push(Series::line(
-        "observed values",
-        steps(&cal.histogram),
+        format!("observed values{per}"),
+        steps(&cal.histogram, 1.0),
         PALETTE[1],
     ));
     c3.series.push(Series::line(
-        "used (by prediction)",
-        steps(&cal.used),
+        format!("used (by prediction){per}"),
+        steps(&cal.used, cal.knot_step),
         PALETTE[4],
     ));
     let fig = Figure {

@@ -96,6 +96,7 @@ pub fn run(args: &Args) -> Result<()> {
         min_exposure: 0.05,
         max_exposure: 20.0,
         step: None,
+        bits: 8,
         sensor: demo_sensor(false),
         force: false,
     };
@@ -116,7 +117,7 @@ pub fn run(args: &Args) -> Result<()> {
         &dir.join("pcalib_estimated.txt"),
         cal.response.to_text().as_bytes(),
     )?;
-    calib::response_figure(&cal, Some(&sweep.response), &dir.join("response.png"))?;
+    calib::response_figure(&cal, Some(&sweep.response[..]), &dir.join("response.png"))?;
     let (max_err, _) = cal.response.errors_against(&sweep.response);
     if !quiet {
         outln!(

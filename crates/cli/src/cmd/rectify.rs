@@ -77,7 +77,8 @@ time (times.txt then lists exposure 1); 8-bit irradiance takes its scale from th
 99.9th percentile of up to 16 frames maps to 255), 16-bit irradiance never clips.
 Without vignette.png, --photometric undoes the response alone (V = 1, with a warning).
 pcalib.txt may hold 2^k values (256 for 8-bit frames, 65536 for 16-bit); 16-bit PNG frames
-are read unscaled, and --bit-depth 10 or 12 says that their values use only the low bits;
+are read unscaled, and --bit-depth 10 or 12 says that their values use only the low bits
+(with --photometric, a table of 2^k values, k < 16, implies --bit-depth k, as DSO indexes it);
 the response is looked up exactly at its own bit depth, by full range otherwise.
 --reverse writes frames in backwards playback order, renumbered, with timestamps 2e9 - t so
 that they increase (the benchmark's convention for backwards runs, understood by
@@ -88,7 +89,8 @@ pub struct Command {
     #[command(flatten)]
     pub args: Args,
     /// Bits per pixel of 16-bit input frames that hold fewer (values in the low bits, e.g.
-    /// 10 or 12 for such sensors); default: 16 for 16-bit frames, 8 for 8-bit frames.
+    /// 10 or 12 for such sensors); default: the bit depth of pcalib.txt with --photometric
+    /// on 16-bit frames, else 16 for 16-bit frames and 8 for 8-bit frames.
     #[arg(long, value_name = "BITS", value_parser = clap::value_parser!(u32).range(1..=16))]
     pub bit_depth: Option<u32>,
 }
@@ -296,7 +298,7 @@ pub fn run_with_bit_depth(args: &Args, bit_depth: Option<u32>) -> Result<Rectifi
         crate::warn(format_args!("{}: {w}", camera_path.display()));
     }
     let in_bits = seq.bits_per_sample();
-    let bits = bit_depth.unwrap_or(in_bits);
+    let mut bits = bit_depth.unwrap_or(in_bits);
     if in_bits == 8 && bits != 8 {
         bail!(
             "--bit-depth {bits}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames whose values use fewer bits",
@@ -356,6 +358,13 @@ pub fn run_with_bit_depth(args: &Args, bit_depth: Option<u32>) -> Result<Rectifi
         }
         None => None,
     };
+    // 16-bit frames with a 2^k-value table (k < 16) and no --bit-depth: the values are k-bit
+    // values in the low bits, as DSO and DM-VIO index the table (`G[pixel]`)
+    if let (None, true, true, Some(r)) = (bit_depth, deep, photometric, &response) {
+        if r.bits() < 16 {
+            bits = r.bits();
+        }
+    }
     let vignette = match &seq.vignette_path {
         Some(p) => Some(crate::cmd::read_vignette(p, seq.image_size())?),
         None => None,

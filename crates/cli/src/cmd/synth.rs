@@ -266,6 +266,12 @@ pub struct SweepArgs {
     /// Exposure step factor instead of --max-exposure (the paper's sweep: 1.05).
     #[arg(long, value_name = "FACTOR")]
     pub step: Option<f64>,
+    /// Bits per sample of the sensor (8 to 16). Above 8 the frames are 16-bit PNGs with the
+    /// values 0..2^K-1 in the low bits (the same sensor with a finer ADC: full well, shot,
+    /// read and ADC noise as a fraction of the full scale are those of 8 bits), and
+    /// truth_pcalib.txt has 2^K values; calibrate with `monovo calib response`.
+    #[arg(long, default_value_t = 8, value_name = "K", value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bits: u32,
     #[command(flatten)]
     pub sensor: SensorArgs,
     /// Replace an existing output folder.
@@ -510,12 +516,28 @@ pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::S
             response: a.sensor.response,
         },
     );
-    write_frames(
-        &out.file("images.zip")?,
-        sweep.exposures_ms.len(),
-        a.sensor.ext(),
-        |i| a.sensor.encode(w, h, &sweep.render(i)),
-    )?;
+    if a.bits > 8 {
+        write_frames(
+            &out.file("images.zip")?,
+            sweep.exposures_ms.len(),
+            "png",
+            |i| {
+                Ok(dataset_io::encode_png_u16(
+                    w,
+                    h,
+                    &sweep.render_deep(i, a.bits),
+                    dataset_io::PngSpeed::Fast,
+                )?)
+            },
+        )?;
+    } else {
+        write_frames(
+            &out.file("images.zip")?,
+            sweep.exposures_ms.len(),
+            a.sensor.ext(),
+            |i| a.sensor.encode(w, h, &sweep.render(i)),
+        )?;
+    }
     let times: String = sweep
         .exposures_ms
         .iter()
@@ -525,7 +547,7 @@ pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::S
     dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
     let cam = synthetic::camera::FovCamera::dataset(w, h);
     dataset_io::write_atomic(&out.file("camera.txt")?, cam.camera_txt((w, h)).as_bytes())?;
-    let truth = photometric::InverseResponse::new(sweep.response)?;
+    let truth = photometric::InverseResponse::from_values(sweep.response_bits(a.bits))?;
     dataset_io::write_atomic(&out.file("truth_pcalib.txt")?, truth.to_text().as_bytes())?;
     Ok(sweep)
 }
