@@ -338,7 +338,7 @@ impl photometric::PlaneFrames for MemoryPlaneFrames {
     fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, photometric::PhotometricError> {
         let p = self.seq.poses[i];
         Ok(photometric::PlaneFrame {
-            image: self.images[i].clone(),
+            image: self.images[i].clone().into(),
             exposure_ms: self.seq.exposures_ms[i],
             pose: photometric::PlanePose { r: p.r, t: p.t },
         })

@@ -49,5 +49,6 @@ pub use response_calib::{
 pub use smoothing::SmoothingChoice;
 pub use vignette::{vignette_errors, Vignette};
 pub use vignette_calib::{
-    calibrate_vignette, PlaneFrame, PlaneFrames, PlanePose, VignetteCalibration, VignetteOptions,
+    calibrate_vignette, PlaneFrame, PlaneFrames, PlaneImage, PlanePose, VignetteCalibration,
+    VignetteOptions,
 };

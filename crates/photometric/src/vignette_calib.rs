@@ -40,11 +40,60 @@ pub struct PlanePose {
     pub t: [f64; 3],
 }
 
+/// The raw samples of a calibration frame.
+#[derive(Clone, Debug)]
+pub enum PlaneImage {
+    /// 8-bit samples; `U` is the inverse response at the 256 grey values
+    /// ([`InverseResponse::values`]).
+    U8(Image<u8>),
+    /// Samples of `bits` bits (8 to 16): the values `0 ..= 2^bits - 1` in the low bits of
+    /// 16-bit samples; `U` is the response table for that depth
+    /// ([`InverseResponse::table_for_bits`]: the table itself when it has `2^bits` values).
+    U16 {
+        /// The samples.
+        image: Image<u16>,
+        /// Bits per sample.
+        bits: u32,
+    },
+}
+
+impl PlaneImage {
+    /// Width and height.
+    pub fn size(&self) -> (usize, usize) {
+        match self {
+            PlaneImage::U8(i) => i.size(),
+            PlaneImage::U16 { image, .. } => image.size(),
+        }
+    }
+
+    /// Bits per sample.
+    pub fn bits(&self) -> u32 {
+        match self {
+            PlaneImage::U8(_) => 8,
+            PlaneImage::U16 { bits, .. } => *bits,
+        }
+    }
+
+    /// The samples as 16-bit values (8-bit ones widened).
+    fn into_samples(self) -> Vec<u16> {
+        match self {
+            PlaneImage::U8(i) => i.data().iter().map(|&v| v as u16).collect(),
+            PlaneImage::U16 { image, .. } => image.into_data(),
+        }
+    }
+}
+
+impl From<Image<u8>> for PlaneImage {
+    fn from(image: Image<u8>) -> Self {
+        PlaneImage::U8(image)
+    }
+}
+
 /// One frame of a vignette calibration.
 #[derive(Clone, Debug)]
 pub struct PlaneFrame {
-    /// The raw 8-bit image.
-    pub image: Image<u8>,
+    /// The raw image (8-bit, or deeper samples in 16 bits).
+    pub image: PlaneImage,
     /// Exposure in ms.
     pub exposure_ms: f64,
     /// Its plane pose.
@@ -285,7 +334,9 @@ fn taps(g: [f64; 2], grid: usize) -> ([usize; 4], [f64; 4], f64, f64) {
 
 /// One frame prepared for the passes.
 struct Prepared {
-    frame: PlaneFrame,
+    /// The raw samples (checked to be at most the problem's `top`).
+    samples: Vec<u16>,
+    exposure_ms: f64,
     m: [[f64; 3]; 3],
     /// Grid cells per pixel at the image centre (scales the registration error).
     cells_per_px: f64,
@@ -299,15 +350,21 @@ struct Problem<'a> {
     /// sample); `V` is indexed by their position here.
     sample: Vec<u32>,
     size: ImageSize,
-    u: [f64; 256],
+    /// `U` at every sample value of the frames' bit depth.
+    u: &'a [f64],
     options: &'a VignetteOptions,
     grid: usize,
 }
 
 impl Problem<'_> {
+    /// The saturated sample value, `2^bits - 1`.
+    fn top(&self) -> u16 {
+        (self.u.len() - 1) as u16
+    }
+
     fn prepare(&self, i: usize) -> Result<Option<Prepared>, PhotometricError> {
         let frame = self.frames.frame(i)?;
-        check_frame(&frame, self.size)?;
+        check_frame(&frame, self.size, self.u.len(), i)?;
         let Some(m) = ray_to_grid(&frame.pose, self.grid, self.options.extent) else {
             return Ok(None);
         };
@@ -320,8 +377,18 @@ impl Problem<'_> {
             (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
             _ => 1.0,
         };
+        let exposure_ms = frame.exposure_ms;
+        let samples = frame.image.into_samples();
+        let top = self.top();
+        if let Some(&v) = samples.iter().find(|&&v| v > top) {
+            return Err(PhotometricError::Calibration(format!(
+                "frame {i} has the value {v}, more than a {}-bit sample holds (at most {top}); if the values are in the high bits of the 16-bit samples, shift them down or use bit depth 16",
+                self.u.len().trailing_zeros()
+            )));
+        }
         Ok(Some(Prepared {
-            frame,
+            samples,
+            exposure_ms,
             m,
             cells_per_px,
         }))
@@ -357,15 +424,15 @@ struct VSums {
 }
 
 impl VSums {
-    fn new(npx: usize) -> VSums {
+    fn new(npx: usize, levels: usize) -> VSums {
         VSums {
             num: vec![0.0; npx],
             den: vec![0.0; npx],
             num_odd: vec![0.0; npx],
             den_odd: vec![0.0; npx],
             counts: vec![0; npx],
-            rss: vec![0.0; 256],
-            rcnt: vec![0.0; 256],
+            rss: vec![0.0; levels],
+            rcnt: vec![0.0; levels],
             chi2: 0.0,
             nobs: 0,
             pred2: 0.0,
@@ -390,9 +457,11 @@ impl VSums {
         for (a, b) in self.counts.iter_mut().zip(&o.counts) {
             *a += b;
         }
-        for k in 0..256 {
-            self.rss[k] += o.rss[k];
-            self.rcnt[k] += o.rcnt[k];
+        for (a, b) in self.rss.iter_mut().zip(&o.rss) {
+            *a += b;
+        }
+        for (a, b) in self.rcnt.iter_mut().zip(&o.rcnt) {
+            *a += b;
         }
         self.chi2 += o.chi2;
         self.nobs += o.nobs;
@@ -402,21 +471,22 @@ impl VSums {
     }
 }
 
-/// Bins of the lookup tables over the energy (U-units) up to `U(255)`.
+/// Bins of the lookup tables over the energy (U-units) up to `U` of the saturated value.
 const VAR_BINS: usize = 2048;
 
 /// Per energy bin: the noise model's variance of `U(I)`, the grey value, and the inverse
 /// slope of `U` there (residuals in grey values for the noise model's fit).
 struct Tables {
     var: Vec<f64>,
-    grey: Vec<u8>,
+    grey: Vec<u16>,
     inv_slope: Vec<f64>,
     scale: f64,
 }
 
 impl Tables {
-    fn new(u: &[f64; 256], noise: &NoiseModel) -> Tables {
-        let top = u[255].max(1e-9);
+    fn new(u: &[f64], noise: &NoiseModel) -> Tables {
+        let last = u.len() - 1;
+        let top = u[last].max(1e-9);
         let scale = (VAR_BINS - 1) as f64 / top;
         let mut t = Tables {
             var: Vec::with_capacity(VAR_BINS),
@@ -427,8 +497,8 @@ impl Tables {
         for b in 0..VAR_BINS {
             let e = b as f64 / scale;
             t.var.push(noise.energy_variance(u, e));
-            let k = u.partition_point(|&x| x <= e).clamp(1, 255);
-            t.grey.push(k as u8);
+            let k = u.partition_point(|&x| x <= e).clamp(1, last);
+            t.grey.push(k as u16);
             t.inv_slope.push(1.0 / (u[k] - u[k - 1]).max(1e-9));
         }
         t
@@ -488,28 +558,29 @@ fn pass(
     let ncell = cells(p.grid);
     let reg2 = p.options.registration_px * p.options.registration_px;
     let out2 = p.options.outlier_sigmas * p.options.outlier_sigmas;
-    let u = &p.u;
+    let u = p.u;
+    let top = p.top();
     let cells_needed = if want_c { ncell } else { 0 };
-    let mut total = VSums::new(npx);
+    let mut total = VSums::new(npx, u.len());
     let mut num_total = vec![0.0f64; cells_needed];
     let mut den_total = vec![0.0f64; cells_needed];
     fold_frame_jobs(
         p.frames.len(),
         |range| -> Result<(VSums, Vec<f32>, Vec<f32>), PhotometricError> {
-            let mut acc = VSums::new(npx);
+            let mut acc = VSums::new(npx, u.len());
             let mut cnum = vec![0.0f32; cells_needed];
             let mut cden = vec![0.0f32; cells_needed];
             for i in range {
                 let Some(pf) = p.prepare(i)? else {
                     continue;
                 };
-                let t = pf.frame.exposure_ms;
+                let t = pf.exposure_ms;
                 let odd = i % 2 == 1;
                 let inv_cpp2 = 1.0 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
-                let data = pf.frame.image.data();
+                let data = &pf.samples;
                 for (px, &pix) in p.sample.iter().enumerate() {
                     let k = data[pix as usize];
-                    if k == 255 {
+                    if k == top {
                         continue;
                     }
                     let Some(g) = grid_coords(p.rays[pix as usize], &pf.m, p.grid) else {
@@ -614,7 +685,7 @@ fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
             for bx in 0..bw {
                 let (x, y) = ((bx * 8 + 4).min(w - 1), (by * 8 + 4).min(h - 1));
                 let px = y * w + x;
-                if pf.frame.image.data()[px] == 255 {
+                if pf.samples[px] == p.top() {
                     continue;
                 }
                 if let Some(g) = grid_coords(p.rays[px], &pf.m, p.grid) {
@@ -778,13 +849,22 @@ pub fn calibrate_vignette(
                 .map_or([f32::NAN; 3], |r| [r[0] as f32, r[1] as f32, r[2] as f32])
         })
         .collect();
+    // U at every sample value of the frames' bit depth (frame 0 tells it; every frame is
+    // checked to agree)
+    let bits = frames.frame(0)?.image.bits();
+    let table: Vec<f64> = match bits {
+        8 => response.values().to_vec(),
+        9..=16 => response.table_for_bits(bits)?,
+        _ => return Err(PhotometricError::BitDepth(bits)),
+    };
+    let u = &table[..];
     // observability: one connected part, image corners covered
     let (parts, labels) = components(&Problem {
         frames,
         rays: &rays,
         sample: Vec::new(),
         size,
-        u: *response.values(),
+        u,
         options,
         grid,
     })?;
@@ -828,7 +908,6 @@ pub fn calibrate_vignette(
             100.0 * (1.0 - frac)
         ));
     }
-    let u = *response.values();
     // coarse to fine: the alternation creeps along smooth trades between V and C, which a
     // problem on every 4th pixel in each direction and a 4x coarser grid resolves at a
     // sixteenth of the cost; its V starts the full problem
@@ -975,7 +1054,7 @@ fn solve(
         reject: warm_start,
     };
     // start: C from V (a Jacobi step from C = 0 is the paper's splat)
-    let mut tables = Tables::new(&u, &model.noise);
+    let mut tables = Tables::new(u, &model.noise);
     // (without outlier rejection: with C = 0 every observation would be one)
     model.reject = false;
     model.c = pass(problem, &model, &tables, true)?.1;
@@ -1053,9 +1132,9 @@ fn solve(
         // the noise model follows the residuals until the fit has settled; then outliers go
         // and the problem stays fixed
         if !warm_start && it < NOISE_FIT_ITERATIONS {
-            if let Some(nm) = fit_noise(&u, &vs.rss, &vs.rcnt) {
+            if let Some(nm) = fit_noise(u, &vs.rss, &vs.rcnt) {
                 model.noise = nm;
-                tables = Tables::new(&u, &model.noise);
+                tables = Tables::new(u, &model.noise);
             }
         }
         if !warm_start && it + 1 == SETTLE {
@@ -1304,15 +1383,33 @@ fn fitted_peak(w: usize, h: usize, map: &[f64], sd: &[f64], sigma_px: f64) -> Op
     (value.is_finite() && var >= 0.0).then_some((value, var.sqrt()))
 }
 
-fn check_frame(f: &PlaneFrame, size: ImageSize) -> Result<(), PhotometricError> {
-    if f.image.size() != (size.width, size.height) {
+/// Checks frame `i` against the image size and the bit depth of the problem (`levels`
+/// sample values).
+fn check_frame(
+    f: &PlaneFrame,
+    size: ImageSize,
+    levels: usize,
+    i: usize,
+) -> Result<(), PhotometricError> {
+    let (got_width, got_height) = f.image.size();
+    if (got_width, got_height) != (size.width, size.height) {
         return Err(PhotometricError::SizeMismatch {
             what: "a calibration frame",
             width: size.width,
             height: size.height,
-            got_width: f.image.width(),
-            got_height: f.image.height(),
+            got_width,
+            got_height,
         });
+    }
+    let bits = f.image.bits();
+    if !(8..=16).contains(&bits) {
+        return Err(PhotometricError::BitDepth(bits));
+    }
+    if 1usize << bits != levels {
+        return Err(PhotometricError::Calibration(format!(
+            "frame {i} has {bits}-bit samples, frame 0 has {}-bit samples; every frame of a calibration has the same bit depth",
+            levels.trailing_zeros()
+        )));
     }
     if !(f.exposure_ms.is_finite() && f.exposure_ms > 0.0) {
         return Err(PhotometricError::Exposure(f.exposure_ms));

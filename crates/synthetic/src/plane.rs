@@ -178,41 +178,73 @@ impl PlaneSequence {
     /// Renders frame `i` (2x2 supersampled) as 8-bit grey, before compression.
     pub fn render(&self, i: usize) -> Vec<u8> {
         let (w, h) = (self.config.width, self.config.height);
+        self.config.sensor.capture(
+            &self.response,
+            w,
+            h,
+            self.exposures_ms[i],
+            self.frame_seed(i),
+            self.energy(i),
+        )
+    }
+
+    /// The ground-truth inverse response of a `bits`-bit sensor (`2^bits` values,
+    /// `U(2^bits - 1) = 255`); with 8 bits it is [`PlaneSequence::response`].
+    pub fn response_bits(&self, bits: u32) -> Vec<f64> {
+        self.config.response.table_bits(bits)
+    }
+
+    /// Frame `i` of a `bits`-bit sensor (8 to 16): values `0 ..= 2^bits - 1` in 16-bit
+    /// samples, stored losslessly (see [`Sensor::capture_deep`]); the same scene, exposure
+    /// and noise streams as [`PlaneSequence::render`].
+    pub fn render_deep(&self, i: usize, bits: u32) -> Vec<u16> {
+        let (w, h) = (self.config.width, self.config.height);
+        self.config.sensor.capture_deep(
+            &self.response_bits(bits),
+            w,
+            h,
+            self.exposures_ms[i],
+            self.frame_seed(i),
+            self.energy(i),
+        )
+    }
+
+    fn frame_seed(&self, i: usize) -> u64 {
+        self.seed ^ 0x9A9A ^ (i as u64) << 20
+    }
+
+    /// The expected linear signal `t V B` of pixel `(x, y)` in frame `i` (U-units, 2x2
+    /// supersampled).
+    fn energy(&self, i: usize) -> impl Fn(usize, usize) -> f64 + Sync + '_ {
+        let w = self.config.width;
         let pose = self.poses[i];
         let t = self.exposures_ms[i];
         let (r, tr) = (pose.rotation(), pose.translation());
         // plane normal and offset in the camera frame
         let n = r.column(2).into_owned();
         let nt = n.dot(&tr);
-        self.config.sensor.capture(
-            &self.response,
-            w,
-            h,
-            t,
-            self.seed ^ 0x9A9A ^ (i as u64) << 20,
-            |x, y| {
-                let mut rad = 0.0;
-                for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
-                    rad += 0.25
-                        * match self.camera.unproject(x as f64 + dx, y as f64 + dy) {
-                            Some(ray) => {
-                                let ray = Vector3::from(ray);
-                                let nr = n.dot(&ray);
-                                let lam = nt / nr;
-                                if nr.abs() < 1e-12 || lam <= 0.0 {
-                                    0.05
-                                } else {
-                                    // plane = R^T (X - t)
-                                    let plane = r.tr_mul(&(ray * lam - tr));
-                                    self.radiance(plane[0], plane[1])
-                                }
+        move |x, y| {
+            let mut rad = 0.0;
+            for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+                rad += 0.25
+                    * match self.camera.unproject(x as f64 + dx, y as f64 + dy) {
+                        Some(ray) => {
+                            let ray = Vector3::from(ray);
+                            let nr = n.dot(&ray);
+                            let lam = nt / nr;
+                            if nr.abs() < 1e-12 || lam <= 0.0 {
+                                0.05
+                            } else {
+                                // plane = R^T (X - t)
+                                let plane = r.tr_mul(&(ray * lam - tr));
+                                self.radiance(plane[0], plane[1])
                             }
-                            None => 0.05,
-                        };
-                }
-                GAIN * t * self.vignette[y * w + x] as f64 * rad
-            },
-        )
+                        }
+                        None => 0.05,
+                    };
+            }
+            GAIN * t * self.vignette[y * w + x] as f64 * rad
+        }
     }
 
     /// Frame `i` as stored by the camera (after the sensor's JPEG compression, if any).

@@ -726,7 +726,7 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
                 .map_err(|e| photometric::PhotometricError::Calibration(e.to_string()))?,
         };
         Ok(photometric::PlaneFrame {
-            image,
+            image: image.into(),
             exposure_ms,
             pose,
         })
