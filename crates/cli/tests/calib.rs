@@ -482,3 +482,113 @@ fn twelve_bit_sweep_end_to_end() {
     assert!(stderr(&o).contains("--bit-depth 10"), "{}", stderr(&o));
     assert!(!d.join("p10.txt").exists());
 }
+
+/// A 12-bit vignette set end to end: `synth vignette --bits 12` writes 16-bit PNG frames and
+/// a 4096-value pcalib.txt; `calib vignette` finds the marker in the deep frames, reads them
+/// as 12-bit samples (the table's depth) and recovers the vignette; the same values in the
+/// high bits give the same map (with a warning); a --bit-depth too small for them is refused.
+#[test]
+fn twelve_bit_vignette_end_to_end() {
+    let d = temp_dir("calib_vignette_12bit");
+    let set = d.join("wall");
+    let o = monovo(&[
+        "synth",
+        "vignette",
+        "-o",
+        set.to_str().unwrap(),
+        "--size",
+        "240x192",
+        "--frames",
+        "50",
+        "--bits",
+        "12",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let pcalib = std::fs::read_to_string(set.join("pcalib.txt")).unwrap();
+    assert_eq!(pcalib.split_whitespace().count(), 4096);
+    let out = d.join("v.png");
+    let o = monovo(&[
+        "calib",
+        "vignette",
+        set.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("50 of 50 frames have a plane pose"),
+        "{}",
+        stdout(&o)
+    );
+    let read = |p: &std::path::Path| {
+        let (img, _) = dataset_io::read_gray16(p).unwrap();
+        let max = *img.data().iter().max().unwrap() as f64;
+        img.data()
+            .iter()
+            .map(|&v| v as f64 / max)
+            .collect::<Vec<f64>>()
+    };
+    let (got, truth) = (read(&out), read(&set.join("truth_vignette.png")));
+    let rms = (got
+        .iter()
+        .zip(&truth)
+        .map(|(g, t)| ((g - t) / t).powi(2))
+        .sum::<f64>()
+        / got.len() as f64)
+        .sqrt();
+    assert!(rms < 0.003, "RMS relative error {rms}");
+    // the same 12-bit values in the high bits of the samples
+    let high = d.join("wall_high");
+    std::fs::create_dir_all(&high).unwrap();
+    for f in ["times.txt", "camera.txt", "pcalib.txt"] {
+        std::fs::copy(set.join(f), high.join(f)).unwrap();
+    }
+    let mut zin =
+        zip::ZipArchive::new(std::fs::File::open(set.join("images.zip")).unwrap()).unwrap();
+    let mut zout = zip::ZipWriter::new(std::fs::File::create(high.join("images.zip")).unwrap());
+    for i in 0..zin.len() {
+        let mut entry = zin.by_index(i).unwrap();
+        let name = entry.name().unwrap().to_string();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
+        let (img, sixteen) = dataset_io::decode_gray16(&bytes).unwrap();
+        assert!(sixteen);
+        let (w, h) = img.size();
+        let shifted: Vec<u16> = img.data().iter().map(|&v| v << 4).collect();
+        let png = dataset_io::encode_png_u16(w, h, &shifted, dataset_io::PngSpeed::Fast).unwrap();
+        zout.start_file(name, zip::write::SimpleFileOptions::default())
+            .unwrap();
+        std::io::Write::write_all(&mut zout, &png).unwrap();
+    }
+    zout.finish().unwrap();
+    let out_high = d.join("v_high.png");
+    let o = monovo(&[
+        "calib",
+        "vignette",
+        high.to_str().unwrap(),
+        "-o",
+        out_high.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("shifted down by 4 bits"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&out_high).unwrap()
+    );
+    let o = monovo(&[
+        "calib",
+        "vignette",
+        high.to_str().unwrap(),
+        "-o",
+        d.join("v10.png").to_str().unwrap(),
+        "--bit-depth",
+        "10",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--bit-depth 10"), "{}", stderr(&o));
+    assert!(!d.join("v10.png").exists());
+}

@@ -190,6 +190,12 @@ pub struct VignetteArgs {
     /// coverage (.png or .svg).
     #[arg(long, value_name = "FILE")]
     pub plot: Option<PathBuf>,
+    /// Bits per sample of 16-bit frames (8 to 16). Default: the bit depth of pcalib.txt
+    /// when its table has more than 256 values (a 4096-value table is indexed by 12-bit
+    /// values, as DSO indexes it), else the fewest bits that hold the brightest value. K-bit
+    /// values in the high bits (every value a multiple of 2^(16-K)) are shifted down.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bit_depth: Option<u32>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -404,9 +410,19 @@ pub fn load_exposed_deep_frames(
 /// `bit_depth` or the fewest bits (at least 8) that hold the brightest value, and a shift
 /// when the given depth's values sit in the high bits.
 pub fn deep_layout(frames: &[Image<u16>], bit_depth: Option<u32>) -> Result<(u32, u32)> {
-    let (max, or) = frames.iter().fold((0u16, 0u16), |(m, o), f| {
-        f.data().iter().fold((m, o), |(m, o), &v| (m.max(v), o | v))
-    });
+    let summary = frames
+        .iter()
+        .fold((0u16, 0u16), |acc, f| sample_summary(acc, f.data()));
+    layout_of(summary, bit_depth)
+}
+
+/// The largest value and the bitwise OR of all values, added to `acc`.
+fn sample_summary(acc: (u16, u16), data: &[u16]) -> (u16, u16) {
+    data.iter().fold(acc, |(m, o), &v| (m.max(v), o | v))
+}
+
+/// [`deep_layout`] from the largest value and the OR of all values of the frames.
+fn layout_of((max, or): (u16, u16), bit_depth: Option<u32>) -> Result<(u32, u32)> {
     let needed = (16 - max.leading_zeros()).max(8);
     let Some(k) = bit_depth else {
         return Ok((needed, 0));
@@ -702,15 +718,66 @@ pub fn response_figure(
 }
 
 /// Frames of a sequence with poses: decoded once and kept when they fit in
-/// [`DECODED_CACHE_BYTES`], else decoded again on every pass (memory stays flat).
+/// [`DECODED_CACHE_BYTES`], else decoded again on every pass (memory stays flat). 16-bit
+/// frames are `bits`-bit samples after a right shift by `shift` (see [`deep_layout`]).
 struct SequencePlaneFrames<'a> {
     seq: &'a Sequence,
     frames: Vec<(usize, f64, photometric::PlanePose)>,
-    decoded: Vec<Image<u8>>,
+    deep: Option<DeepLayout>,
+    decoded: Vec<photometric::PlaneImage>,
+}
+
+/// The bit depth of the samples of a 16-bit sequence and the shift that brings them to the
+/// low bits.
+#[derive(Clone, Copy, Debug)]
+struct DeepLayout {
+    bits: u32,
+    shift: u32,
+}
+
+impl DeepLayout {
+    /// A frame as the calibration reads it.
+    fn plane_image(&self, image: dataset_io::GrayImage) -> photometric::PlaneImage {
+        match image {
+            dataset_io::GrayImage::U8(i) => photometric::PlaneImage::U8(i),
+            dataset_io::GrayImage::U16(mut image) => {
+                if self.shift > 0 {
+                    for v in image.data_mut() {
+                        *v >>= self.shift;
+                    }
+                }
+                photometric::PlaneImage::U16 {
+                    image,
+                    bits: self.bits,
+                }
+            }
+        }
+    }
+
+    /// A frame as 8-bit grey for the marker detector (full range: `v 255 / (2^bits - 1)`).
+    fn eight_bit(&self, image: &dataset_io::GrayImage) -> Image<u8> {
+        match image {
+            dataset_io::GrayImage::U8(i) => i.clone(),
+            dataset_io::GrayImage::U16(i) => {
+                let top = ((1u32 << self.bits) - 1) as f32;
+                let scale = 255.0 / top;
+                i.map(|v| ((v >> self.shift) as f32 * scale).round().min(255.0) as u8)
+            }
+        }
+    }
 }
 
 /// Largest total size of decoded frames kept in memory by `calib vignette`.
 const DECODED_CACHE_BYTES: usize = 192 << 20;
+
+impl SequencePlaneFrames<'_> {
+    fn decode(&self, k: usize) -> Result<photometric::PlaneImage> {
+        Ok(match self.deep {
+            Some(d) => d.plane_image(self.seq.decode_native(k)?),
+            None => photometric::PlaneImage::U8(self.seq.decode(k)?),
+        })
+    }
+}
 
 impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
     fn len(&self) -> usize {
@@ -721,12 +788,11 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
         let image = match self.decoded.get(i) {
             Some(img) => img.clone(),
             None => self
-                .seq
                 .decode(k)
-                .map_err(|e| photometric::PhotometricError::Calibration(e.to_string()))?,
+                .map_err(|e| photometric::PhotometricError::Calibration(format!("{e:#}")))?,
         };
         Ok(photometric::PlaneFrame {
-            image: image.into(),
+            image,
             exposure_ms,
             pose,
         })
@@ -844,6 +910,61 @@ pub fn vignette_figure(
 
 /// Frames with a plane pose (index, exposure in ms, pose) and the count of skipped frames
 /// per reason.
+/// The bit depth of a 16-bit sequence's samples for `calib vignette`: `--bit-depth`, else
+/// the depth of a table of more than 256 values, else the fewest bits that hold the
+/// brightest value; one pass over the frames tells whether the values sit in the high bits.
+fn sequence_layout(
+    seq: &Sequence,
+    bit_depth: Option<u32>,
+    response: &photometric::InverseResponse,
+) -> Result<DeepLayout> {
+    let idx = seq.indices(0..seq.len(), false);
+    let pb = progress::bar(idx.len() as u64, "bit depth", "frames");
+    let mut summary = (0u16, 0u16);
+    seq.process_native(
+        &idx,
+        rayon::current_num_threads() * 4,
+        |f| {
+            pb.inc(1);
+            Ok::<_, anyhow::Error>(match f.image {
+                dataset_io::GrayImage::U16(i) => sample_summary((0, 0), i.data()),
+                dataset_io::GrayImage::U8(i) => {
+                    (i.data().iter().copied().max().unwrap_or(0) as u16, 0xFF)
+                }
+            })
+        },
+        |s| {
+            summary = (summary.0.max(s.0), summary.1 | s.1);
+            Ok(())
+        },
+    )?;
+    pb.finish_and_clear();
+    let table_bits = response.bits();
+    let wanted = bit_depth.or((table_bits > 8).then_some(table_bits));
+    let (bits, shift) = layout_of(summary, wanted).with_context(|| {
+        if bit_depth.is_none() && wanted.is_some() {
+            format!(
+                "the bit depth {table_bits} of the pcalib.txt table (give --bit-depth to override)"
+            )
+        } else {
+            seq.dir().display().to_string()
+        }
+    })?;
+    if shift > 0 {
+        crate::warn(format_args!(
+            "the {bits}-bit values are in the high bits of the 16-bit samples (every value is a multiple of {}); shifted down by {shift} bits",
+            1u32 << shift
+        ));
+    }
+    if table_bits > 8 && table_bits != bits {
+        crate::warn(format_args!(
+            "pcalib.txt has {} values ({table_bits}-bit) but the frames are taken as {bits}-bit: the table is read by full range",
+            1u32 << table_bits
+        ));
+    }
+    Ok(DeepLayout { bits, shift })
+}
+
 type PosedFrames = (
     Vec<(usize, f64, photometric::PlanePose)>,
     std::collections::BTreeMap<&'static str, usize>,
@@ -854,6 +975,7 @@ fn plane_poses(
     a: &VignetteArgs,
     seq: &Sequence,
     cam: &camera_model::CameraFile,
+    deep: Option<DeepLayout>,
 ) -> Result<PosedFrames> {
     use camera_model::{output_intrinsics, OutputMode, RectifyMap};
     use photometric::marker::PoseFromMarker;
@@ -888,19 +1010,27 @@ fn plane_poses(
     let idx = seq.indices(0..seq.len(), false);
     let pb = progress::bar(idx.len() as u64, "markers", "frames");
     let mut found: Vec<(usize, PoseFromMarker)> = Vec::new();
-    seq.process(
-        &idx,
-        rayon::current_num_threads() * 4,
-        |f| -> Result<(usize, PoseFromMarker)> {
-            let r = photometric::marker::pose_from_marker(&map, &k_out, &f.image, a.marker_id)?;
-            pb.inc(1);
-            Ok((f.index, r))
-        },
-        |r| {
-            found.push(r);
-            Ok(())
-        },
-    )?;
+    let detect = |index: usize, image: &Image<u8>| -> Result<(usize, PoseFromMarker)> {
+        let r = photometric::marker::pose_from_marker(&map, &k_out, image, a.marker_id)?;
+        pb.inc(1);
+        Ok((index, r))
+    };
+    let sink = |r| {
+        found.push(r);
+        Ok(())
+    };
+    let chunk = rayon::current_num_threads() * 4;
+    match deep {
+        // deep frames are scaled to 8 bits by their bit depth (a 12-bit frame read as 8
+        // bits of 16 would be black)
+        Some(d) => seq.process_native(
+            &idx,
+            chunk,
+            |f| detect(f.index, &d.eight_bit(&f.image)),
+            sink,
+        )?,
+        None => seq.process(&idx, chunk, |f| detect(f.index, &f.image), sink)?,
+    }
     pb.finish_and_clear();
     for (k, result) in found {
         match result {
@@ -925,6 +1055,8 @@ pub struct VignetteRun {
     pub skipped: std::collections::BTreeMap<&'static str, usize>,
     /// The options used.
     pub options: photometric::VignetteOptions,
+    /// Bits per sample the frames were read with (8, or the depth of 16-bit frames).
+    pub bits: u32,
 }
 
 /// Poses (from the marker or `--poses`) and the calibration, without writing anything.
@@ -952,7 +1084,18 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
             seq.times_path().display()
         );
     }
-    let (frames, skipped) = plane_poses(a, &seq, cam)?;
+    let deep = if seq.bits_per_sample() == 16 {
+        Some(sequence_layout(&seq, a.bit_depth, &response)?)
+    } else {
+        if let Some(k) = a.bit_depth {
+            bail!(
+                "--bit-depth {k}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames",
+                a.sequence.display()
+            );
+        }
+        None
+    };
+    let (frames, skipped) = plane_poses(a, &seq, cam, deep)?;
     if frames.is_empty() {
         bail!(
             "{}: no frame has a plane pose (marker id {} was not found in any of {} frames{}); check --marker-id, the dictionary (original ArUco) and that the marker is fully visible",
@@ -981,33 +1124,35 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
             }
         )?;
     }
-    let bytes = frames.len() * cam.input_size.pixels();
-    let decoded = if bytes <= DECODED_CACHE_BYTES {
-        let idx: Vec<usize> = frames.iter().map(|f| f.0).collect();
-        let mut out = Vec::with_capacity(idx.len());
-        let pb = progress::bar(idx.len() as u64, "decoding", "frames");
-        seq.process(
-            &idx,
-            rayon::current_num_threads() * 4,
-            |f| {
-                pb.inc(1);
-                Ok::<_, anyhow::Error>(f.image)
-            },
-            |img| {
-                out.push(img);
-                Ok(())
-            },
-        )?;
-        pb.finish_and_clear();
-        out
-    } else {
-        Vec::new()
-    };
-    let source = SequencePlaneFrames {
+    let sample_bytes = if deep.is_some() { 2 } else { 1 };
+    let bytes = frames.len() * cam.input_size.pixels() * sample_bytes;
+    let mut source = SequencePlaneFrames {
         seq: &seq,
         frames,
-        decoded,
+        deep,
+        decoded: Vec::new(),
     };
+    if bytes <= DECODED_CACHE_BYTES {
+        let idx: Vec<usize> = source.frames.iter().map(|f| f.0).collect();
+        let mut out = Vec::with_capacity(idx.len());
+        let pb = progress::bar(idx.len() as u64, "decoding", "frames");
+        for part in idx.chunks(rayon::current_num_threads() * 4) {
+            use rayon::prelude::*;
+            let images: Vec<Result<photometric::PlaneImage>> = part
+                .par_iter()
+                .map(|&k| {
+                    let r = source.decode(k);
+                    pb.inc(1);
+                    r
+                })
+                .collect();
+            for image in images {
+                out.push(image?);
+            }
+        }
+        pb.finish_and_clear();
+        source.decoded = out;
+    }
     let pb = progress::spinner("calibrating");
     let cal = photometric::calibrate_vignette(
         &cam.input,
@@ -1030,6 +1175,7 @@ pub fn calibrate_vignette_sequence(a: &VignetteArgs) -> Result<VignetteRun> {
         used: source.frames.len(),
         skipped,
         options: opts,
+        bits: deep.map_or(8, |d| d.bits),
     })
 }
 
@@ -1048,6 +1194,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         used,
         skipped,
         options,
+        bits,
     } = calibrate_vignette_sequence(a)?;
     let skipped_total: usize = skipped.values().sum();
     for w in &cal.warnings {
@@ -1147,6 +1294,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "raw_scale": raw_max,
                 "frames_used": used,
                 "frames_skipped": skipped_total,
+                "bits": bits,
                 "skipped": skipped.iter().map(|(k, v)| (k.to_string(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>(),
                 "iterations": cal.iterations,
                 "converged": cal.converged,

@@ -145,6 +145,7 @@ pub fn run(args: &Args) -> Result<()> {
         size: ImageSize::new(640, 512),
         frames: 100,
         sensor: demo_sensor(false),
+        bits: 8,
         force: false,
     };
     let wall = synth::write_vignette_set(&vig_out, &vig_args)?;
@@ -162,6 +163,7 @@ pub fn run(args: &Args) -> Result<()> {
         smoothing: None,
         registration_px: None,
         plot: None,
+        bit_depth: None,
         json: true,
     })?;
     let vig_secs = t.elapsed().as_secs_f64();

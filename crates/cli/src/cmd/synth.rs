@@ -122,6 +122,11 @@ pub struct VignetteArgs {
     pub frames: usize,
     #[command(flatten)]
     pub sensor: SensorArgs,
+    /// Bits per sample (8 to 16): above 8, 16-bit PNG frames with the values 0..2^K-1 in
+    /// the low bits (the same sensor with a finer ADC), and a pcalib.txt of 2^K values.
+    #[arg(long, default_value_t = 8, value_name = "K",
+          value_parser = clap::value_parser!(u32).range(8..=16))]
+    pub bits: u32,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
@@ -145,12 +150,23 @@ pub fn write_vignette_set(
             ..PlaneConfig::default()
         },
     );
-    write_frames(
-        &out.file("images.zip")?,
-        seq.poses.len(),
-        a.sensor.ext(),
-        |i| a.sensor.encode(w, h, &seq.render(i)),
-    )?;
+    if a.bits > 8 {
+        write_frames(&out.file("images.zip")?, seq.poses.len(), "png", |i| {
+            Ok(dataset_io::encode_png_u16(
+                w,
+                h,
+                &seq.render_deep(i, a.bits),
+                dataset_io::PngSpeed::Fast,
+            )?)
+        })?;
+    } else {
+        write_frames(
+            &out.file("images.zip")?,
+            seq.poses.len(),
+            a.sensor.ext(),
+            |i| a.sensor.encode(w, h, &seq.render(i)),
+        )?;
+    }
     let times: String = seq
         .exposures_ms
         .iter()
@@ -163,7 +179,7 @@ pub fn write_vignette_set(
         .camera_txt((w, h))
         .replace("\ncrop\n", "\nfull\n");
     dataset_io::write_atomic(&out.file("camera.txt")?, cam.as_bytes())?;
-    let resp = photometric::InverseResponse::new(seq.response)?;
+    let resp = photometric::InverseResponse::from_values(seq.response_bits(a.bits))?;
     dataset_io::write_atomic(&out.file("pcalib.txt")?, resp.to_text().as_bytes())?;
     dataset_io::write_atomic(&out.file("poses.txt")?, seq.poses_text().as_bytes())?;
     let vig =
