@@ -24,9 +24,9 @@ pub enum PhotometricError {
         /// The offending token.
         token: String,
     },
-    /// An inverse response with a number of values that is not a power of two from 256 to
-    /// 65536.
-    #[error("{}expected 2^k values (256 for 8-bit, 65536 for 16-bit images), found {found} numbers", at_line(*line))]
+    /// An inverse response with a number of values that is neither a power of two from 256 to
+    /// 65536 nor a deep sensor's table ending at its saturation value (513 to 65536 values).
+    #[error("{}expected 2^k values (256 for 8-bit, 65536 for 16-bit images, or 513 to 65536 for a deeper table that ends at the saturation value), found {found} numbers", at_line(*line))]
     ValueCount {
         /// 1-based line of the last value (0 when not from a file).
         line: usize,

@@ -8,14 +8,25 @@
 //! white on white, like the usual 8-to-16-bit conversion `v * 257`), and `U` is interpolated
 //! linearly between the two neighbouring entries; when `b == k` the lookup is exact.
 //! A 12-bit sensor stored in the low 12 bits of a 16-bit PNG therefore has bit depth 12.
+//!
+//! **Tables that end at the saturation value.** The 16-bit forks of the authors' tools write
+//! `saturation value + 1` numbers (4001 for a 12-bit sensor that saturates at 4000) and
+//! index them with the raw value. A table of more than 512 values whose length is not a
+//! power of two is read that way: its bit depth is the next power of two's (12 for 4001),
+//! the values above the saturation value take `U` of it, and [`InverseResponse::to_text`]
+//! writes it back with as many values as it was given.
 
 use crate::PhotometricError;
 
 /// The inverse response `U`: grey value to (relative) irradiance times exposure.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct InverseResponse {
-    /// `2^k` values, `k` in 8..=16.
+    /// `2^k` values, `k` in 8..=16 (a shorter table from a file continued with its last
+    /// value, see [`InverseResponse::saturation_value`]).
     table: Vec<f64>,
+    /// How many of them the file gave (`2^k`, or the saturation value + 1).
+    #[serde(skip)]
+    given: usize,
     /// The table at the 256 grey values of 8-bit frames (the table itself when `k == 8`).
     #[serde(skip)]
     u8_table: [f64; 256],
@@ -37,13 +48,21 @@ fn sample(table: &[f64], v: u32, bits: u32) -> f64 {
     }
 }
 
+/// Whether a table of `n` values can be read: `2^k` values (`k` from 8 to 16), or more than
+/// 512 (a sensor of 10 bits and more) ending at the saturation value.
+fn acceptable_len(n: usize) -> bool {
+    (n.is_power_of_two() && (256..=65536).contains(&n)) || (513..=65536).contains(&n)
+}
+
 impl InverseResponse {
     /// Validates 256 values: finite and strictly increasing.
     pub fn new(u: [f64; 256]) -> Result<InverseResponse, PhotometricError> {
         InverseResponse::from_values(u.to_vec())
     }
 
-    /// Validates `2^k` values (`k` from 8 to 16): finite and strictly increasing.
+    /// Validates `2^k` values (`k` from 8 to 16), or more than 512 values that end at the
+    /// saturation value (see [`InverseResponse::saturation_value`]): finite and strictly
+    /// increasing.
     pub fn from_values(values: Vec<f64>) -> Result<InverseResponse, PhotometricError> {
         InverseResponse::checked(values, |_| 0)
     }
@@ -53,7 +72,7 @@ impl InverseResponse {
         line_of: impl Fn(usize) -> usize,
     ) -> Result<InverseResponse, PhotometricError> {
         let n = table.len();
-        if !(n.is_power_of_two() && (256..=65536).contains(&n)) {
+        if !acceptable_len(n) {
             return Err(PhotometricError::ValueCount {
                 line: line_of(n.saturating_sub(1)),
                 found: n,
@@ -76,11 +95,19 @@ impl InverseResponse {
                 });
             }
         }
+        // a table that ends at the saturation value: the values above it are saturated
+        let mut table = table;
+        let last = table[n - 1];
+        table.resize(n.next_power_of_two(), last);
         let mut u8_table = [0.0; 256];
         for (v, u) in u8_table.iter_mut().enumerate() {
             *u = sample(&table, v as u32, 8);
         }
-        Ok(InverseResponse { table, u8_table })
+        Ok(InverseResponse {
+            table,
+            given: n,
+            u8_table,
+        })
     }
 
     /// The linear response `U(k) = k` of 8-bit images.
@@ -91,6 +118,7 @@ impl InverseResponse {
         }
         InverseResponse {
             table: u.to_vec(),
+            given: 256,
             u8_table: u,
         }
     }
@@ -168,12 +196,25 @@ impl InverseResponse {
         }
         let u =
             InverseResponse::checked(values, |i| lines_of.get(i).copied().unwrap_or(last_line))?;
+        if !u.given.is_power_of_two() {
+            notes.push(format!(
+                "{} values: read as a {}-bit table that ends at the saturation value {} (as the 16-bit forks of the authors' tools write it); the values above it are saturated and take U({})",
+                u.given,
+                u.bits(),
+                u.given - 1,
+                u.given - 1
+            ));
+        }
         Ok((u, notes))
     }
 
-    /// pcalib.txt text: one line of all `2^k` numbers at full precision.
+    /// pcalib.txt text: one line of all `2^k` numbers (or as many as were read, for a table
+    /// that ends at the saturation value) at full precision.
     pub fn to_text(&self) -> String {
-        let parts: Vec<String> = self.table.iter().map(|v| format!("{v}")).collect();
+        let parts: Vec<String> = self.table[..self.given]
+            .iter()
+            .map(|v| format!("{v}"))
+            .collect();
         format!("{}\n", parts.join(" "))
     }
 
@@ -191,6 +232,15 @@ impl InverseResponse {
     /// `k`: the bit depth the table is indexed by (8 for 256 values, 16 for 65536).
     pub fn bits(&self) -> u32 {
         self.table.len().trailing_zeros()
+    }
+
+    /// The largest sample value the table was given for: `2^k - 1`, or `n - 1` for a table of
+    /// `n` values that is not a power of two (more than 512 values). The 16-bit forks of the
+    /// authors' tools write `saturation value + 1` values (for example 4001 for a 12-bit
+    /// sensor that saturates at 4000) and index the table with the raw value, as monovo does;
+    /// the values above it take `U` of the saturation value.
+    pub fn saturation_value(&self) -> u32 {
+        (self.given - 1) as u32
     }
 
     /// `U` of the brightest value (white), the same at every bit depth.
@@ -248,6 +298,7 @@ impl InverseResponse {
         let s = 255.0 / self.max_value();
         InverseResponse {
             table: self.table.iter().map(|v| v * s).collect(),
+            given: self.given,
             u8_table: self.u8_table.map(|v| v * s),
         }
     }

@@ -42,7 +42,7 @@ fn bad_pcalib_is_refused_with_the_reason() {
     let e = InverseResponse::parse("1 2 3").unwrap_err();
     assert!(
         e.to_string()
-            == "line 1: expected 2^k values (256 for 8-bit, 65536 for 16-bit images), found 3 numbers",
+            == "line 1: expected 2^k values (256 for 8-bit, 65536 for 16-bit images, or 513 to 65536 for a deeper table that ends at the saturation value), found 3 numbers",
         "{e}"
     );
     let e = InverseResponse::parse(&format!(
@@ -171,4 +171,53 @@ fn response_errors_are_scale_aware() {
     let (max, rms) = scaled.errors_against(&truth);
     assert!((max - 0.05 * truth[254]).abs() < 1e-9, "{max}");
     assert!(rms < 1e-9, "{rms}");
+}
+
+/// A deep table that ends at the saturation value, as the 16-bit forks of the authors' tools
+/// write it (saturation value + 1 numbers): read as a table of the next power of two whose
+/// values above the saturation value are saturated, written back as given, with a note.
+#[test]
+fn a_table_ending_at_the_saturation_value_is_read_as_the_forks_write_it() {
+    let values: Vec<f64> = (0..4001)
+        .map(|k| (k as f64 / 4000.0).powf(1.8) * 255.0)
+        .collect();
+    let text = values
+        .iter()
+        .map(|v| format!("{v}"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let (u, notes) = InverseResponse::parse_with_notes(&text).unwrap();
+    assert_eq!(u.bits(), 12);
+    assert_eq!(u.saturation_value(), 4000);
+    assert_eq!(u.table().len(), 4096);
+    assert_eq!(&u.table()[..4001], &values[..]);
+    assert!(u.table()[4001..].iter().all(|&v| v == values[4000]));
+    assert_eq!(u.max_value(), values[4000]);
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("4001 values") && n.contains("saturation value 4000")),
+        "{notes:?}"
+    );
+    // the 12-bit lookup indexes it directly; values above 4000 are saturated
+    let t12 = u.table_for_bits(12).unwrap();
+    assert_eq!(t12[1234], values[1234]);
+    assert_eq!(t12[4095], values[4000]);
+    // written back with 4001 numbers, and read again to the same table
+    let again = InverseResponse::parse(&u.to_text()).unwrap();
+    assert_eq!(u.to_text().split_whitespace().count(), 4001);
+    assert_eq!(again, u);
+    // a table must still increase where it is given
+    let mut bad = values.clone();
+    bad[3000] = bad[2999];
+    let e = InverseResponse::from_values(bad).unwrap_err();
+    assert!(
+        matches!(e, PhotometricError::NotIncreasing { index: 3000, .. }),
+        "{e}"
+    );
+    // short odd lengths are no deep table: most likely a damaged 8-bit file
+    for n in [255, 257, 300, 511, 512] {
+        let r = InverseResponse::from_values((0..n).map(|k| k as f64).collect());
+        assert_eq!(r.is_ok(), n == 512, "{n} values");
+    }
 }
