@@ -80,6 +80,14 @@ impl monovo_pipelines::Observer for Bars {
             }
         }
     }
+    fn status(&self, message: &str) {
+        if let Ok(mut b) = self.0.lock() {
+            match b.as_ref() {
+                Some(pb) => pb.set_message(message.to_string()),
+                None => *b = Some(spinner(message)),
+            }
+        }
+    }
     fn finish(&self) {
         if let Ok(mut b) = self.0.lock() {
             if let Some(b) = b.take() {

@@ -24,6 +24,7 @@
 #![deny(missing_docs)]
 
 mod batch;
+pub mod calib;
 pub mod camera;
 pub mod demo;
 mod error;

@@ -10,6 +10,9 @@ pub trait Observer: Sync {
     fn begin(&self, _len: u64, _what: &str, _unit: &'static str) {}
     /// `n` more things of the current stage are done (called from any thread).
     fn advance(&self, _n: u64) {}
+    /// The state of an open-ended stage, such as an iteration and its convergence measure
+    /// (a stage of its own until [`Observer::finish`]).
+    fn status(&self, _message: &str) {}
     /// The current stage is over.
     fn finish(&self) {}
 }

@@ -103,7 +103,8 @@ pub fn run(args: &Args) -> Result<()> {
     let sweep = synth::write_sweep(&sweep_out, &sweep_args)?;
     sweep_out.commit()?;
     let sweep_seq = Sequence::open(&dir.join("sweep"))?;
-    let (mut frames, exposures) = calib::load_exposed_frames(&sweep_seq)?;
+    let (mut frames, exposures) =
+        calib::load_exposed_frames(&sweep_seq, &monovo_pipelines::Silent)?;
     let t = Instant::now();
     let cal = photometric::calibrate_response(
         &mut frames,
@@ -151,21 +152,17 @@ pub fn run(args: &Args) -> Result<()> {
     let wall = synth::write_vignette_set(&vig_out, &vig_args)?;
     vig_out.commit()?;
     let t = Instant::now();
-    let run = calib::calibrate_vignette_sequence(&calib::VignetteArgs {
-        sequence: dir.join("wall"),
-        output: dir.join("vignette_estimated.png"),
-        force: false,
-        pcalib: None,
-        poses: None,
-        marker_id: 213,
-        config: None,
-        max_iterations: None,
-        smoothing: None,
-        registration_px: None,
-        plot: None,
-        bit_depth: None,
-        json: true,
-    })?;
+    let run = calib::calibrate_vignette_sequence(
+        &calib::VignetteJob {
+            sequence: dir.join("wall"),
+            pcalib: None,
+            poses: None,
+            marker_id: 213,
+            bit_depth: None,
+            options: photometric::VignetteOptions::default(),
+        },
+        &monovo_pipelines::Silent,
+    )?;
     let vig_secs = t.elapsed().as_secs_f64();
     let vig_smoothing = run.cal.smoothing.sigma_px;
     let (vig_rms, _) = photometric::vignette_errors(run.cal.vignette.data(), &wall.vignette);
