@@ -34,6 +34,7 @@ pub mod exposure;
 mod inspect;
 mod observe;
 pub mod paper;
+pub mod synth;
 
 pub use batch::{
     evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount, StrayFile,

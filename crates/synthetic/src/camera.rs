@@ -53,9 +53,15 @@ impl FovCamera {
 
     /// camera.txt text (legacy relative FOV line; output `crop` at `out`).
     pub fn camera_txt(&self, out: (usize, usize)) -> String {
+        self.camera_txt_with(out, "crop")
+    }
+
+    /// camera.txt text with the output camera `mode` (line 3: `crop`, `full`, `none` or a
+    /// pinhole `fx fy cx cy 0`) at `out`.
+    pub fn camera_txt_with(&self, out: (usize, usize), mode: &str) -> String {
         let (w, h) = (self.width as f64, self.height as f64);
         format!(
-            "FOV {} {} {} {} {}\n{} {}\ncrop\n{} {}\n",
+            "FOV {} {} {} {} {}\n{} {}\n{mode}\n{} {}\n",
             self.fx / w,
             self.fy / h,
             (self.cx + 0.5) / w,

@@ -13,8 +13,9 @@ use monovo_pipelines::demo::{
 };
 use monovo_pipelines::paper::{medians_json, medians_text};
 
-use crate::cmd::{calib, rectify, synth};
+use crate::cmd::{calib, rectify};
 use crate::progress::Bars;
+use monovo_pipelines::synth;
 
 /// Arguments of `monovo demo`.
 #[derive(clap::Args, Debug)]
@@ -69,16 +70,13 @@ pub fn run(args: &Args) -> Result<()> {
         "rendering a benchmark-like sequence (640x512, 200 frames, FOV camera)",
     )?;
     let seq_out = OutputDir::create(&dir.join("sequence"), false)?;
-    let seq_args = synth::SequenceArgs {
-        output: dir.join("sequence"),
+    let seq_spec = synth::SequenceSpec {
         seed: args.seed,
         size: ImageSize::new(640, 512),
         frames: 200,
-        sensor: demo_sensor(false),
-        exposure: synth::SequenceExposureArgs::default(),
-        force: false,
+        ..Default::default()
     };
-    let truth_seq = synth::write_sequence(&seq_out, &seq_args)?;
+    let truth_seq = synth::write_sequence(&seq_out, &seq_spec, &Bars::default())?;
     seq_out.commit()?;
 
     // 2. response calibration
@@ -88,19 +86,13 @@ pub fn run(args: &Args) -> Result<()> {
         "calibrating the response from a synthetic exposure sweep",
     )?;
     let sweep_out = OutputDir::create(&dir.join("sweep"), false)?;
-    let sweep_args = synth::SweepArgs {
-        output: dir.join("sweep"),
+    let sweep_spec = synth::SweepSpec {
         seed: args.seed,
         size: ImageSize::new(640, 512),
         frames: 60,
-        min_exposure: 0.05,
-        max_exposure: 20.0,
-        step: None,
-        bits: 8,
-        sensor: demo_sensor(false),
-        force: false,
+        ..Default::default()
     };
-    let sweep = synth::write_sweep(&sweep_out, &sweep_args)?;
+    let sweep = synth::write_sweep(&sweep_out, &sweep_spec, &Bars::default())?;
     sweep_out.commit()?;
     let sweep_seq = Sequence::open(&dir.join("sweep"))?;
     let (mut frames, exposures) =
@@ -140,16 +132,13 @@ pub fn run(args: &Args) -> Result<()> {
         "calibrating the vignette from a marker-plane video (ArUco 213, 640x512, 100 frames)",
     )?;
     let vig_out = OutputDir::create(&dir.join("wall"), false)?;
-    let vig_args = synth::VignetteArgs {
-        output: dir.join("wall"),
+    let vig_spec = synth::VignetteSetSpec {
         seed: args.seed,
         size: ImageSize::new(640, 512),
         frames: 100,
-        sensor: demo_sensor(false),
-        bits: 8,
-        force: false,
+        ..Default::default()
     };
-    let wall = synth::write_vignette_set(&vig_out, &vig_args)?;
+    let wall = synth::write_vignette_set(&vig_out, &vig_spec, &Bars::default())?;
     vig_out.commit()?;
     let t = Instant::now();
     let run = calib::calibrate_vignette_sequence(
@@ -253,15 +242,11 @@ pub fn run(args: &Args) -> Result<()> {
         "generating and evaluating 1000 runs of two synthetic VO methods",
     )?;
     let res_out = OutputDir::create(&dir.join("benchmark"), false)?;
-    let res_args = synth::ResultsArgs {
-        output: dir.join("benchmark"),
+    let res_spec = synth::ResultsSpec {
         seed: args.seed,
-        sequences: 50,
-        runs: 5,
-        frames: 2000,
-        force: false,
+        ..Default::default()
     };
-    synth::write_results(&res_out, &res_args)?;
+    synth::write_results(&res_out, &res_spec, &Bars::default())?;
     res_out.commit()?;
     let evaluation = evaluate_benchmark(&dir, &Bars::default())?;
     let (records, eval_secs, lines) =
@@ -308,14 +293,4 @@ pub fn run(args: &Args) -> Result<()> {
     outln!("wrote {} in {total:.0} s:", final_dir.display())?;
     out!("{}", demo_files_text(&final_dir))?;
     Ok(())
-}
-
-/// The demo's synthetic sensor: typical noise, the default response, JPEG 90 (or PNG).
-fn demo_sensor(png: bool) -> synth::SensorArgs {
-    synth::SensorArgs {
-        noise: synthetic::sensor::NoiseLevel::Typical,
-        response: synthetic::camera::ResponseCurve::Dataset,
-        quality: 90,
-        png,
-    }
 }

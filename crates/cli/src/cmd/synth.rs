@@ -4,10 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use dataset_io::OutputDir;
-use rayon::prelude::*;
-use synthetic::results::{run_text, sequence_name, sequence_path, ResultsConfig};
+use monovo_pipelines::synth::{
+    write_results, write_sequence, write_sweep, write_vignette_set, ResultsSpec, SensorSpec,
+    SequenceSpec, SweepSpec, VignetteSetSpec,
+};
 
-use crate::progress;
+use crate::progress::Bars;
 
 /// Arguments of `monovo synth`.
 #[derive(clap::Args, Debug)]
@@ -76,32 +78,13 @@ pub struct SensorArgs {
 }
 
 impl SensorArgs {
-    /// The sensor these arguments describe.
-    pub fn sensor(&self) -> synthetic::sensor::Sensor {
-        let s = synthetic::sensor::Sensor::preset(self.noise);
-        if self.png {
-            s
-        } else {
-            s.with_jpeg(self.quality)
+    /// The library's sensor description.
+    pub fn spec(&self) -> SensorSpec {
+        SensorSpec {
+            noise: self.noise,
+            response: self.response,
+            jpeg_quality: (!self.png).then_some(self.quality),
         }
-    }
-
-    /// The extension of the stored frames.
-    fn ext(&self) -> &'static str {
-        if self.png {
-            "png"
-        } else {
-            "jpg"
-        }
-    }
-
-    /// Encodes a rendered frame as the camera stores it.
-    fn encode(&self, w: usize, h: usize, frame: &[u8]) -> Result<Vec<u8>> {
-        Ok(if self.png {
-            dataset_io::encode_png_u8(w, h, 1, frame, dataset_io::PngSpeed::Fast)?
-        } else {
-            dataset_io::encode_jpeg_gray(w, h, frame, self.quality)?
-        })
     }
 }
 
@@ -132,68 +115,6 @@ pub struct VignetteArgs {
     pub force: bool,
 }
 
-/// Writes a synthetic vignette-calibration set into `out`.
-pub fn write_vignette_set(
-    out: &OutputDir,
-    a: &VignetteArgs,
-) -> Result<synthetic::plane::PlaneSequence> {
-    use synthetic::plane::{PlaneConfig, PlaneSequence};
-    let (w, h) = (a.size.width, a.size.height);
-    let seq = PlaneSequence::new(
-        a.seed,
-        PlaneConfig {
-            width: w,
-            height: h,
-            frames: a.frames.max(1),
-            sensor: a.sensor.sensor(),
-            response: a.sensor.response,
-            ..PlaneConfig::default()
-        },
-    );
-    if a.bits > 8 {
-        write_frames(&out.file("images.zip")?, seq.poses.len(), "png", |i| {
-            Ok(dataset_io::encode_png_u16(
-                w,
-                h,
-                &seq.render_deep(i, a.bits),
-                dataset_io::PngSpeed::Fast,
-            )?)
-        })?;
-    } else {
-        write_frames(
-            &out.file("images.zip")?,
-            seq.poses.len(),
-            a.sensor.ext(),
-            |i| a.sensor.encode(w, h, &seq.render(i)),
-        )?;
-    }
-    let times: String = seq
-        .exposures_ms
-        .iter()
-        .enumerate()
-        .map(|(i, e)| format!("{i:05} {:.6} {e}\n", 1_400_000_000.0 + i as f64 * 0.1))
-        .collect();
-    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
-    let cam = seq
-        .camera
-        .camera_txt((w, h))
-        .replace("\ncrop\n", "\nfull\n");
-    dataset_io::write_atomic(&out.file("camera.txt")?, cam.as_bytes())?;
-    let resp = photometric::InverseResponse::from_values(seq.response_bits(a.bits))?;
-    dataset_io::write_atomic(&out.file("pcalib.txt")?, resp.to_text().as_bytes())?;
-    dataset_io::write_atomic(&out.file("poses.txt")?, seq.poses_text().as_bytes())?;
-    let vig =
-        photometric::Vignette::from_values(camera_model::Image::new(w, h, seq.vignette.clone())?)?;
-    dataset_io::write_png_u16(
-        &out.file("truth_vignette.png")?,
-        w,
-        h,
-        vig.to_u16().data(),
-        dataset_io::PngSpeed::Default,
-    )?;
-    Ok(seq)
-}
-
 /// Arguments of `monovo synth sequence`.
 #[derive(clap::Args, Debug)]
 pub struct SequenceArgs {
@@ -216,6 +137,24 @@ pub struct SequenceArgs {
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
+}
+
+impl SequenceArgs {
+    /// The library's description of the sequence.
+    pub fn spec(&self) -> SequenceSpec {
+        let e = &self.exposure;
+        SequenceSpec {
+            seed: self.seed,
+            size: self.size,
+            frames: self.frames,
+            sensor: self.sensor.spec(),
+            exposure: e.exposure,
+            length: e.length,
+            shift_exposures: e.shift_exposures,
+            shift_min_change: e.shift_min_change,
+            no_exposures: e.no_exposures,
+        }
+    }
 }
 
 /// The exposures of a synthetic sequence and how they are logged.
@@ -318,262 +257,12 @@ pub struct ResultsArgs {
     pub force: bool,
 }
 
-/// Writes a synthetic results set into `out` (a staging folder); returns the number of runs.
-pub fn write_results(out: &OutputDir, a: &ResultsArgs) -> Result<usize> {
-    let cfg = ResultsConfig {
-        sequences: a.sequences.max(1),
-        runs: a.runs.max(1),
-        frames: a.frames.max(50),
-        ..ResultsConfig::default()
-    };
-    let paths: Vec<_> = (1..=cfg.sequences)
-        .into_par_iter()
-        .map(|i| sequence_path(a.seed, i, cfg.frames))
-        .collect();
-    for (i, p) in paths.iter().enumerate() {
-        let f = out.file(&format!(
-            "dataset/{}/groundtruthSync.txt",
-            sequence_name(i + 1)
-        ))?;
-        dataset_io::write_atomic(&f, p.ground_truth_sync().as_bytes())?;
-    }
-    let mut jobs = Vec::new();
-    for (mi, _) in cfg.methods.iter().enumerate() {
-        for s in 0..cfg.sequences {
-            for bwd in [false, true] {
-                for r in 0..cfg.runs {
-                    jobs.push((mi, s, bwd, r));
-                }
-            }
-        }
-    }
-    let pb = progress::bar(jobs.len() as u64, "generating", "runs");
-    jobs.par_iter()
-        .try_for_each(|&(mi, s, bwd, r)| -> Result<()> {
-            let m = &cfg.methods[mi];
-            let text = run_text(a.seed, &paths[s], m, mi, s + 1, bwd, r);
-            let rel = format!(
-                "results/{}/{}/{}_{r}.txt",
-                m.name,
-                sequence_name(s + 1),
-                if bwd { "bwd" } else { "fwd" }
-            );
-            dataset_io::write_atomic(&out.file(&rel)?, text.as_bytes())?;
-            pb.inc(1);
-            Ok(())
-        })?;
-    pb.finish_and_clear();
-    Ok(jobs.len())
-}
-
-/// Encodes frames in parallel chunks and writes them as images.zip.
-fn write_frames(
-    zip_path: &std::path::Path,
-    frames: usize,
-    ext: &str,
-    render: impl Fn(usize) -> Result<Vec<u8>> + Sync,
-) -> Result<()> {
-    let pb = progress::bar(frames as u64, "rendering", "frames");
-    let encoded: Vec<Result<(String, Vec<u8>)>> = (0..frames)
-        .into_par_iter()
-        .map(|i| {
-            let bytes = render(i)?;
-            pb.inc(1);
-            Ok((format!("{i:05}.{ext}"), bytes))
-        })
-        .collect();
-    pb.finish_and_clear();
-    let entries: Vec<(String, Vec<u8>)> = encoded.into_iter().collect::<Result<_>>()?;
-    dataset_io::write_images_zip(zip_path, entries)?;
-    Ok(())
-}
-
-/// Writes a synthetic benchmark sequence into the folder `out`.
-pub fn write_sequence(
-    out: &OutputDir,
-    a: &SequenceArgs,
-) -> Result<synthetic::scene::SyntheticSequence> {
-    use synthetic::scene::{SequenceConfig, SyntheticSequence};
-    let e = &a.exposure;
-    if !(e.length.is_finite() && e.length > 0.0) {
-        anyhow::bail!(
-            "--length must be a positive number of metres, got {}",
-            e.length
-        );
-    }
-    if !(e.shift_min_change.is_finite() && e.shift_min_change >= 0.0) {
-        anyhow::bail!(
-            "--shift-min-change must be a percentage of at least 0, got {}",
-            e.shift_min_change
-        );
-    }
-    if e.shift_exposures > 0 && e.no_exposures {
-        anyhow::bail!("--shift-exposures needs logged exposures; leave out --no-exposures");
-    }
-    let cfg = SequenceConfig {
-        width: a.size.width,
-        height: a.size.height,
-        frames: a.frames.max(8),
-        sensor: a.sensor.sensor(),
-        response: a.sensor.response,
-        exposure: e.exposure,
-        path_length: e.length,
-        ..SequenceConfig::default()
-    };
-    let seq = SyntheticSequence::new(a.seed, cfg);
-    let (w, h) = (cfg.width, cfg.height);
-    write_frames(&out.file("images.zip")?, cfg.frames, a.sensor.ext(), |i| {
-        a.sensor.encode(w, h, &seq.render(i))
-    })?;
-    let rows = seq.times();
-    let truth: String = rows
-        .iter()
-        .map(|(id, t, e)| format!("{id} {t:.6} {e}\n"))
-        .collect();
-    let (logged, shifts) = synthetic::scene::shift_exposure_log(
-        &seq.exposures_ms,
-        e.shift_exposures,
-        e.shift_min_change / 100.0,
-        a.seed,
-    );
-    if shifts.len() < e.shift_exposures {
-        eprintln!(
-            "monovo: warning: only {} of {} exposure shifts fit (isolated, changing the log by at least {}%)",
-            shifts.len(),
-            e.shift_exposures,
-            e.shift_min_change
-        );
-    }
-    let times: String = rows
-        .iter()
-        .zip(&logged)
-        .map(|((id, t, _), l)| {
-            if e.no_exposures {
-                format!("{id} {t:.6}\n")
-            } else {
-                format!("{id} {t:.6} {l}\n")
-            }
-        })
-        .collect();
-    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
-    if times != truth {
-        dataset_io::write_atomic(&out.file("truth_times.txt")?, truth.as_bytes())?;
-    }
-    if e.shift_exposures > 0 {
-        let mut text = String::from(
-            "# frame (0-based) whose logged exposure is another frame's: frame source true_ms logged_ms\n",
-        );
-        for s in &shifts {
-            text.push_str(&format!(
-                "{} {} {} {}\n",
-                s.frame, s.source, seq.exposures_ms[s.frame], logged[s.frame]
-            ));
-        }
-        dataset_io::write_atomic(&out.file("truth_shifts.txt")?, text.as_bytes())?;
-    }
-    // the dataset's output camera: 640x480 (4:3 at most 640 wide, as its camera.txt says)
-    let out_w = w.clamp(2, 640);
-    let out_size = (out_w, (out_w * 3 / 4).max(2));
-    dataset_io::write_atomic(
-        &out.file("camera.txt")?,
-        seq.camera.camera_txt(out_size).as_bytes(),
-    )?;
-    let pcalib = photometric::InverseResponse::new(seq.response)?;
-    dataset_io::write_atomic(&out.file("pcalib.txt")?, pcalib.to_text().as_bytes())?;
-    let vig =
-        photometric::Vignette::from_values(camera_model::Image::new(w, h, seq.vignette.clone())?)?;
-    let v16 = vig.to_u16();
-    dataset_io::write_png_u16(
-        &out.file("vignette.png")?,
-        w,
-        h,
-        v16.data(),
-        dataset_io::PngSpeed::Default,
-    )?;
-    dataset_io::write_atomic(
-        &out.file("groundtruthSync.txt")?,
-        seq.path.ground_truth_sync().as_bytes(),
-    )?;
-    Ok(seq)
-}
-
-/// Writes a synthetic response-calibration sweep into the folder `out`.
-pub fn write_sweep(out: &OutputDir, a: &SweepArgs) -> Result<synthetic::scene::Sweep> {
-    use synthetic::scene::{Sweep, SweepConfig};
-    let (w, h) = (a.size.width, a.size.height);
-    let frames = a.frames.max(2);
-    if !(a.min_exposure.is_finite() && a.min_exposure > 0.0) {
-        anyhow::bail!(
-            "--min-exposure must be a positive number of ms, got {}",
-            a.min_exposure
-        );
-    }
-    let factor = match a.step {
-        Some(s) if s.is_finite() && s > 1.0 => s,
-        Some(s) => anyhow::bail!("--step must be a factor above 1, got {s}"),
-        None if a.max_exposure.is_finite() && a.max_exposure > a.min_exposure => {
-            (a.max_exposure / a.min_exposure).powf(1.0 / (frames - 1) as f64)
-        }
-        None => anyhow::bail!(
-            "--max-exposure ({}) must be longer than --min-exposure ({})",
-            a.max_exposure,
-            a.min_exposure
-        ),
-    };
-    let sweep = Sweep::new(
-        a.seed,
-        SweepConfig {
-            width: w,
-            height: h,
-            frames,
-            t0: a.min_exposure,
-            factor,
-            sensor: a.sensor.sensor(),
-            response: a.sensor.response,
-        },
-    );
-    if a.bits > 8 {
-        write_frames(
-            &out.file("images.zip")?,
-            sweep.exposures_ms.len(),
-            "png",
-            |i| {
-                Ok(dataset_io::encode_png_u16(
-                    w,
-                    h,
-                    &sweep.render_deep(i, a.bits),
-                    dataset_io::PngSpeed::Fast,
-                )?)
-            },
-        )?;
-    } else {
-        write_frames(
-            &out.file("images.zip")?,
-            sweep.exposures_ms.len(),
-            a.sensor.ext(),
-            |i| a.sensor.encode(w, h, &sweep.render(i)),
-        )?;
-    }
-    let times: String = sweep
-        .exposures_ms
-        .iter()
-        .enumerate()
-        .map(|(i, e)| format!("{i:05} {:.6} {e}\n", 1_400_000_000.0 + i as f64 * 0.05))
-        .collect();
-    dataset_io::write_atomic(&out.file("times.txt")?, times.as_bytes())?;
-    let cam = synthetic::camera::FovCamera::dataset(w, h);
-    dataset_io::write_atomic(&out.file("camera.txt")?, cam.camera_txt((w, h)).as_bytes())?;
-    let truth = photometric::InverseResponse::from_values(sweep.response_bits(a.bits))?;
-    dataset_io::write_atomic(&out.file("truth_pcalib.txt")?, truth.to_text().as_bytes())?;
-    Ok(sweep)
-}
-
 /// Runs `monovo synth`.
 pub fn run(args: &Args) -> Result<()> {
     let (dir, text, json) = match &args.what {
         What::Sequence(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
-            let seq = write_sequence(&out, a)?;
+            let seq = write_sequence(&out, &a.spec(), &Bars::default())?;
             let dir = out.commit()?;
             let c = &seq.config;
             (
@@ -584,7 +273,17 @@ pub fn run(args: &Args) -> Result<()> {
         }
         What::Vignette(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
-            let seq = write_vignette_set(&out, a)?;
+            let seq = write_vignette_set(
+                &out,
+                &VignetteSetSpec {
+                    seed: a.seed,
+                    size: a.size,
+                    frames: a.frames,
+                    bits: a.bits,
+                    sensor: a.sensor.spec(),
+                },
+                &Bars::default(),
+            )?;
             let dir = out.commit()?;
             let c = &seq.config;
             (
@@ -600,7 +299,17 @@ pub fn run(args: &Args) -> Result<()> {
         }
         What::Sweep(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
-            let sw = write_sweep(&out, a)?;
+            let spec = SweepSpec {
+                seed: a.seed,
+                size: a.size,
+                frames: a.frames,
+                min_exposure: a.min_exposure,
+                max_exposure: a.max_exposure,
+                step: a.step,
+                bits: a.bits,
+                sensor: a.sensor.spec(),
+            };
+            let sw = write_sweep(&out, &spec, &Bars::default())?;
             let dir = out.commit()?;
             let lo = sw.exposures_ms.first().copied().unwrap_or(0.0);
             let hi = sw.exposures_ms.last().copied().unwrap_or(0.0);
@@ -617,7 +326,13 @@ pub fn run(args: &Args) -> Result<()> {
         }
         What::Results(a) => {
             let out = OutputDir::create(&a.output, a.force)?;
-            let n = write_results(&out, a)?;
+            let spec = ResultsSpec {
+                seed: a.seed,
+                sequences: a.sequences,
+                runs: a.runs,
+                frames: a.frames,
+            };
+            let n = write_results(&out, &spec, &Bars::default())?;
             let dir = out.commit()?;
             (
                 dir,
