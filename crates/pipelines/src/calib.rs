@@ -12,7 +12,7 @@ use dataset_io::Sequence;
 use rayon::prelude::*;
 
 use crate::figures::{self, Chart, Corner, Figure, Panel, Series, PALETTE};
-use crate::{Observer, PipelineError, Result};
+use crate::{Observer, PipelineError, Result, WithContext};
 
 /// Reads every frame of a sequence at its own bit depth with its exposure; errors when
 /// exposures are missing.
@@ -956,4 +956,190 @@ pub fn write_vignette_maps(
         raw_scale: raw_max,
         std_scale,
     })
+}
+
+/// What `monovo calib response` calibrates: a sweep folder and the options.
+#[derive(Clone, Debug)]
+pub struct ResponseJob {
+    /// The sequence folder (a static scene, times.txt with exposures).
+    pub sequence: PathBuf,
+    /// Bits per sample of 16-bit frames (see [`deep_layout`]; `None`: the fewest bits that
+    /// hold the brightest value).
+    pub bit_depth: Option<u32>,
+    /// The calibration options.
+    pub options: photometric::ResponseOptions,
+}
+
+/// A response calibration of a sweep, as `monovo calib response` runs it.
+#[derive(Clone, Debug)]
+pub struct ResponseRun {
+    /// The calibration.
+    pub cal: photometric::ResponseCalibration,
+    /// Frames used.
+    pub frames: usize,
+    /// What the sweep offers (exposures and grey values, see [`sweep_report`]), and for
+    /// deep frames the knots of the estimate.
+    pub report: String,
+}
+
+/// Reads a sweep (8-bit frames, or 16-bit frames at their bit depth) and calibrates the
+/// inverse response; the frames' decoding and the iterations are reported to `observer`.
+pub fn calibrate_response_sequence(
+    job: &ResponseJob,
+    observer: &dyn Observer,
+) -> Result<ResponseRun> {
+    let seq = Sequence::open(&job.sequence)?;
+    for w in &seq.times().warnings {
+        observer.warn(w);
+    }
+    if seq.len() < 2 {
+        return Err(PipelineError::Invalid(format!(
+            "{}: response calibration needs at least 2 frames at different exposures, found {}",
+            job.sequence.display(),
+            seq.len()
+        )));
+    }
+    let context = || job.sequence.display().to_string();
+    let tick = |i: usize, change: f64| {
+        observer.status(&format!(
+            "iteration {i}, U changed by {change:.4} grey values"
+        ));
+    };
+    let run = if seq.bits_per_sample() == 16 {
+        let (frames, exposures, bits) = load_exposed_deep_frames(&seq, job.bit_depth, observer)?;
+        let report = format!(
+            "{}\n{bits}-bit frames: U is estimated on {} knots and written as {} values",
+            sweep_report(&frames, (1u32 << bits) - 1, &exposures),
+            (1usize << bits).min(photometric::MAX_KNOTS),
+            1u32 << bits
+        );
+        let cal =
+            photometric::calibrate_response_deep(&frames, bits, &exposures, &job.options, &tick);
+        observer.finish();
+        ResponseRun {
+            cal: cal.with_context(context)?,
+            frames: frames.len(),
+            report,
+        }
+    } else {
+        if let Some(k) = job.bit_depth.filter(|&k| k != 8) {
+            return Err(PipelineError::Invalid(format!(
+                "--bit-depth {k}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames",
+                job.sequence.display()
+            )));
+        }
+        let (mut frames, exposures) = load_exposed_frames(&seq, observer)?;
+        let report = sweep_report(&frames, 255, &exposures);
+        let cal = photometric::calibrate_response(&mut frames, &exposures, &job.options, &tick);
+        observer.finish();
+        ResponseRun {
+            cal: cal.with_context(context)?,
+            frames: frames.len(),
+            report,
+        }
+    };
+    Ok(run)
+}
+
+/// Writes pcalib.txt and, at `std_path`, the standard error of every `U(k)` on one line.
+pub fn write_response(
+    cal: &photometric::ResponseCalibration,
+    output: &Path,
+    std_path: &Path,
+) -> Result<()> {
+    dataset_io::write_atomic(output, cal.response.to_text().as_bytes())?;
+    let std_text = cal
+        .std_error
+        .iter()
+        .map(|v| format!("{v}"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    dataset_io::write_atomic(std_path, format!("{std_text}\n").as_bytes())?;
+    Ok(())
+}
+
+/// The options of a calibration config file (`--config FILE`): a `[response]` and a
+/// `[vignette]` table with any fields of [`photometric::ResponseOptions`] and
+/// [`photometric::VignetteOptions`] (data/calib.toml lists them all with their defaults).
+/// Absent fields and tables keep the defaults; an unknown field is an error naming it.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibConfig {
+    /// Options of the response calibration.
+    pub response: photometric::ResponseOptions,
+    /// Options of the vignette calibration.
+    pub vignette: photometric::VignetteOptions,
+}
+
+impl CalibConfig {
+    /// Parses a config file's text.
+    pub fn parse(text: &str) -> std::result::Result<CalibConfig, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    /// Reads the config file, or gives the defaults without one.
+    pub fn load(path: Option<&Path>) -> Result<CalibConfig> {
+        let Some(path) = path else {
+            return Ok(CalibConfig::default());
+        };
+        let text = dataset_io::read_text(path)?;
+        CalibConfig::parse(&text).map_err(|e| {
+            PipelineError::Invalid(format!(
+                "{}: not a calibration config: {}",
+                path.display(),
+                e.to_string().trim_end()
+            ))
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The example config in the repository.
+    const EXAMPLE: &str = include_str!("../../../data/calib.toml");
+
+    fn json<T: serde::Serialize>(v: &T) -> serde_json::Value {
+        serde_json::to_value(v).unwrap()
+    }
+
+    #[test]
+    fn the_example_config_lists_every_option_with_its_default() {
+        use photometric::{ResponseOptions, VignetteOptions};
+        let c = CalibConfig::parse(EXAMPLE).unwrap();
+        assert_eq!(json(&c.response), json(&ResponseOptions::default()));
+        assert_eq!(json(&c.vignette), json(&VignetteOptions::default()));
+        // a new option must be added to the example (commented out when it has no value)
+        for (table, options) in [
+            ("response", json(&ResponseOptions::default())),
+            ("vignette", json(&VignetteOptions::default())),
+        ] {
+            let section = EXAMPLE.split(&format!("[{table}]")).nth(1).unwrap();
+            let section = section.split("\n[").next().unwrap();
+            for key in options.as_object().unwrap().keys() {
+                assert!(
+                    section.contains(&format!("\n{key} = "))
+                        || section.contains(&format!("\n# {key} = ")),
+                    "data/calib.toml has no `{key}` in [{table}]"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_are_errors_that_name_them() {
+        let e = CalibConfig::parse("[response]\nmax_iteration = 3\n").unwrap_err();
+        assert!(e.to_string().contains("max_iteration"), "{e}");
+        let e = CalibConfig::parse("[respons]\ntolerance = 0.1\n").unwrap_err();
+        assert!(e.to_string().contains("respons"), "{e}");
+        let e = CalibConfig::parse("[vignette]\ngrid = \"fine\"\n").unwrap_err();
+        assert!(e.to_string().contains("grid"), "{e}");
+        // an empty file is the defaults
+        let c = CalibConfig::parse("").unwrap();
+        assert_eq!(
+            json(&c.vignette),
+            json(&photometric::VignetteOptions::default())
+        );
+    }
 }

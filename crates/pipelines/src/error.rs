@@ -115,3 +115,60 @@ pub fn json_number(v: f64) -> serde_json::Value {
         serde_json::Value::Null
     }
 }
+
+/// `with_context` for the errors of the library crates: the cause keeps its type as the
+/// `source` of a [`PipelineError`] whose message is the context.
+pub trait WithContext<T> {
+    /// The error with `context()` in front.
+    fn with_context<C: Into<String>>(self, context: impl FnOnce() -> C) -> Result<T>;
+}
+
+impl<T> WithContext<T> for std::result::Result<T, photometric::PhotometricError> {
+    fn with_context<C: Into<String>>(self, context: impl FnOnce() -> C) -> Result<T> {
+        self.map_err(|source| PipelineError::Photometric {
+            context: context().into(),
+            source,
+        })
+    }
+}
+
+impl<T> WithContext<T> for std::result::Result<T, camera_model::CameraError> {
+    fn with_context<C: Into<String>>(self, context: impl FnOnce() -> C) -> Result<T> {
+        self.map_err(|source| PipelineError::Camera {
+            context: context().into(),
+            source,
+        })
+    }
+}
+
+impl<T> WithContext<T> for std::result::Result<T, PipelineError> {
+    fn with_context<C: Into<String>>(self, context: impl FnOnce() -> C) -> Result<T> {
+        self.map_err(|e| e.context(context()))
+    }
+}
+
+impl<T> WithContext<T> for std::result::Result<T, std::num::ParseIntError> {
+    fn with_context<C: Into<String>>(self, context: impl FnOnce() -> C) -> Result<T> {
+        self.map_err(|e| PipelineError::Invalid(format!("{}: {e}", context().into())))
+    }
+}
+
+impl From<photometric::PhotometricError> for PipelineError {
+    /// The error without a context line (its own message names what failed).
+    fn from(source: photometric::PhotometricError) -> Self {
+        PipelineError::Photometric {
+            context: String::new(),
+            source,
+        }
+    }
+}
+
+impl From<camera_model::CameraError> for PipelineError {
+    /// The error without a context line (its own message names what failed).
+    fn from(source: camera_model::CameraError) -> Self {
+        PipelineError::Camera {
+            context: String::new(),
+            source,
+        }
+    }
+}

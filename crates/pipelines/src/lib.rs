@@ -34,13 +34,14 @@ pub mod exposure;
 mod inspect;
 mod observe;
 pub mod paper;
+pub mod rectify;
 pub mod synth;
 
 pub use batch::{
     evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount, StrayFile,
 };
 pub use camera::{summarize_camera, CameraSummary};
-pub use error::{error_chain, json_number, PipelineError, Result};
+pub use error::{error_chain, json_number, PipelineError, Result, WithContext};
 pub use eval::{
     alignment_figure, evaluation_text, load_ground_truth, load_trajectory, save_alignment_figure,
     EvaluationReport,

@@ -2,13 +2,13 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
-use photometric::{calibrate_response, ResponseOptions};
+use anyhow::{Context, Result};
+use photometric::ResponseOptions;
 
 pub use monovo_pipelines::calib::{
-    calibrate_vignette_sequence, load_exposed_deep_frames, load_exposed_frames, response_figure,
-    sibling, sweep_report, vignette_figure, write_vignette_maps, MapScales, VignetteFiles,
-    VignetteJob, VignetteRun,
+    calibrate_response_sequence, calibrate_vignette_sequence, load_exposed_frames, response_figure,
+    sibling, vignette_figure, write_response, write_vignette_maps, CalibConfig, MapScales,
+    ResponseJob, ResponseRun, VignetteFiles, VignetteJob, VignetteRun,
 };
 
 use crate::plot;
@@ -210,41 +210,6 @@ fn with_default(text: &str, default: impl std::fmt::Display) -> String {
     format!("{text} [default: {default}, or from --config]")
 }
 
-/// The options of `--config FILE`: a `[response]` and a `[vignette]` table with any fields
-/// of [`ResponseOptions`] and [`photometric::VignetteOptions`] (data/calib.toml lists them
-/// all with their defaults). Absent fields and tables keep the defaults; an unknown field is
-/// an error naming it.
-#[derive(Debug, Default, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct CalibConfig {
-    /// Options of `monovo calib response`.
-    pub response: ResponseOptions,
-    /// Options of `monovo calib vignette`.
-    pub vignette: photometric::VignetteOptions,
-}
-
-impl CalibConfig {
-    /// Parses a config file's text.
-    pub fn parse(text: &str) -> Result<CalibConfig, toml::de::Error> {
-        toml::from_str(text)
-    }
-
-    /// Reads the config file, or gives the defaults without one.
-    pub fn load(path: Option<&Path>) -> Result<CalibConfig> {
-        let Some(path) = path else {
-            return Ok(CalibConfig::default());
-        };
-        let text = dataset_io::read_text(path)?;
-        CalibConfig::parse(&text).map_err(|e| {
-            anyhow::anyhow!(
-                "{}: not a calibration config: {}",
-                path.display(),
-                e.to_string().trim_end()
-            )
-        })
-    }
-}
-
 /// The response options: the defaults, then `--config`, then the flags; clamped to sane
 /// values.
 pub fn response_options(a: &ResponseArgs) -> Result<ResponseOptions> {
@@ -317,64 +282,23 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         outs.push(p);
     }
     check_outputs(&outs, a.force)?;
-    let opts = response_options(a)?;
-    let seq = crate::cmd::open_sequence(&a.sequence)?;
-    if seq.len() < 2 {
-        bail!(
-            "{}: response calibration needs at least 2 frames at different exposures, found {}",
-            a.sequence.display(),
-            seq.len()
-        );
+    let job = ResponseJob {
+        sequence: a.sequence.clone(),
+        bit_depth: a.bit_depth,
+        options: response_options(a)?,
+    };
+    let ResponseRun {
+        cal,
+        frames: nframes,
+        report,
+    } = calibrate_response_sequence(&job, &progress::Bars::default())?;
+    if !a.json {
+        outln!("{report}")?;
     }
-    let pb = progress::spinner("calibrating");
-    let tick = |i: usize, change: f64| {
-        pb.set_message(format!(
-            "iteration {i}, U changed by {change:.4} grey values"
-        ));
-        pb.tick();
-    };
-    let (cal, nframes) = if seq.bits_per_sample() == 16 {
-        let (frames, exposures, bits) =
-            load_exposed_deep_frames(&seq, a.bit_depth, &progress::Bars::default())?;
-        if !a.json {
-            outln!("{}", sweep_report(&frames, (1u32 << bits) - 1, &exposures))?;
-            outln!(
-                "{bits}-bit frames: U is estimated on {} knots and written as {} values",
-                (1usize << bits).min(photometric::MAX_KNOTS),
-                1u32 << bits
-            )?;
-        }
-        let cal = photometric::calibrate_response_deep(&frames, bits, &exposures, &opts, &tick)
-            .with_context(|| format!("{}", a.sequence.display()))?;
-        (cal, frames.len())
-    } else {
-        if let Some(k) = a.bit_depth.filter(|&k| k != 8) {
-            bail!(
-                "--bit-depth {k}: the frames of {} are 8-bit; --bit-depth describes 16-bit frames",
-                a.sequence.display()
-            );
-        }
-        let (mut frames, exposures) = load_exposed_frames(&seq, &progress::Bars::default())?;
-        let report = sweep_report(&frames, 255, &exposures);
-        if !a.json {
-            outln!("{report}")?;
-        }
-        let cal = calibrate_response(&mut frames, &exposures, &opts, &tick)
-            .with_context(|| format!("{}", a.sequence.display()))?;
-        (cal, frames.len())
-    };
-    pb.finish_and_clear();
     for w in &cal.warnings {
         crate::warn(format_args!("{w}"));
     }
-    dataset_io::write_atomic(&a.output, cal.response.to_text().as_bytes())?;
-    let std_text = cal
-        .std_error
-        .iter()
-        .map(|v| format!("{v}"))
-        .collect::<Vec<_>>()
-        .join(" ");
-    dataset_io::write_atomic(&std_path, format!("{std_text}\n").as_bytes())?;
+    write_response(&cal, &a.output, &std_path)?;
     if let Some(p) = &a.plot {
         response_figure(&cal, None, p)?;
     }
@@ -572,9 +496,6 @@ mod tests {
     use super::*;
     use clap::Parser;
 
-    /// The example config in the repository.
-    const EXAMPLE: &str = include_str!("../../../../data/calib.toml");
-
     #[derive(clap::Parser)]
     struct Response {
         #[command(flatten)]
@@ -589,47 +510,6 @@ mod tests {
 
     fn json<T: serde::Serialize>(v: &T) -> serde_json::Value {
         serde_json::to_value(v).unwrap()
-    }
-
-    #[test]
-    fn the_example_config_lists_every_option_with_its_default() {
-        let c = CalibConfig::parse(EXAMPLE).unwrap();
-        assert_eq!(json(&c.response), json(&ResponseOptions::default()));
-        assert_eq!(
-            json(&c.vignette),
-            json(&photometric::VignetteOptions::default())
-        );
-        // a new option must be added to the example (commented out when it has no value)
-        for (table, options) in [
-            ("response", json(&ResponseOptions::default())),
-            ("vignette", json(&photometric::VignetteOptions::default())),
-        ] {
-            let section = EXAMPLE.split(&format!("[{table}]")).nth(1).unwrap();
-            let section = section.split("\n[").next().unwrap();
-            for key in options.as_object().unwrap().keys() {
-                assert!(
-                    section.contains(&format!("\n{key} = "))
-                        || section.contains(&format!("\n# {key} = ")),
-                    "data/calib.toml has no `{key}` in [{table}]"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn unknown_keys_and_wrong_types_are_errors_that_name_them() {
-        let e = CalibConfig::parse("[response]\nmax_iteration = 3\n").unwrap_err();
-        assert!(e.to_string().contains("max_iteration"), "{e}");
-        let e = CalibConfig::parse("[respons]\ntolerance = 0.1\n").unwrap_err();
-        assert!(e.to_string().contains("respons"), "{e}");
-        let e = CalibConfig::parse("[vignette]\ngrid = \"fine\"\n").unwrap_err();
-        assert!(e.to_string().contains("grid"), "{e}");
-        // an empty file is the defaults
-        let c = CalibConfig::parse("").unwrap();
-        assert_eq!(
-            json(&c.vignette),
-            json(&photometric::VignetteOptions::default())
-        );
     }
 
     #[test]

@@ -12,10 +12,10 @@ use monovo_pipelines::demo::{
     MARKER,
 };
 use monovo_pipelines::paper::{medians_json, medians_text};
+use monovo_pipelines::{rectify, synth};
 
-use crate::cmd::{calib, rectify};
+use crate::cmd::calib;
 use crate::progress::Bars;
-use monovo_pipelines::synth;
 
 /// Arguments of `monovo demo`.
 #[derive(clap::Args, Debug)]
@@ -198,23 +198,12 @@ pub fn run(args: &Args) -> Result<()> {
         4,
         "rectifying the sequence to a 640x480 pinhole and undoing response and vignette",
     )?;
-    let rect_args = rectify::Args {
-        sequence: dir.join("sequence"),
-        output: dir.join("rectified"),
-        pinhole: None,
+    let rect_job = rectify::RectifyJob {
         size: Some(ImageSize::new(640, 480)),
         photometric: true,
-        irradiance: false,
-        mask_saturated: false,
-        scale: None,
-        reverse: false,
-        range: None,
-        depth: 8,
-        zip: false,
-        force: false,
-        json: false,
+        ..rectify::RectifyJob::new(dir.join("sequence"), dir.join("rectified"))
     };
-    let rectified = rectify::run(&rect_args)?;
+    let rectified = rectify::rectify_sequence(&rect_job, &Bars::default())?;
     if !quiet {
         outln!(
             "      {} frames to fx={:.1} fy={:.1} cx={:.1} cy={:.1} in {:.1} s ({:.0} frames/s)",
