@@ -1,7 +1,6 @@
-//! The README's Rust examples, word for word: compiled here, and a test checks that every
-//! ```rust block of the README appears in this file unchanged (so neither can drift).
-#![allow(dead_code, unused_variables)]
-// eval_example and correction_example need a sequence folder: compiled, not run
+//! The README's Rust examples: doctests of monovo-pipelines (compiled, not run: two need a
+//! sequence folder); the camera example also runs here from the repository's root.
+#![allow(unused_variables)]
 
 use std::error::Error;
 
@@ -17,60 +16,28 @@ let pinhole = map.remap_u8(&raw)?;          // 640x480, bilinear, invalid pixels
     Ok(())
 }
 
-#[rustfmt::skip]
-fn eval_example() -> Result<(), Box<dyn Error>> {
-use eval_metrics::{evaluate, parse_tum, GroundTruth};
-
-let gt = GroundTruth::parse(&std::fs::read_to_string("sequence_01/groundtruthSync.txt")?)?;
-let run = evaluate(&parse_tum(&std::fs::read_to_string("fwd_0.txt")?)?, &gt);
-match &run.failure {
-    None => println!("e_align {:.3} e_s {:.3} e_r {:.2}", run.metrics.e_align, run.metrics.e_s, run.metrics.e_r),
-    Some(reason) => println!("failed: {reason}"),
-}
-    Ok(())
-}
-
-#[rustfmt::skip]
-fn correction_example() -> Result<(), Box<dyn Error>> {
-use dataset_io::Sequence;
-use photometric::{Correction, InverseResponse, Vignette};
-
-let seq = Sequence::open("sequence_01".as_ref())?;                 // validates everything
-let u = InverseResponse::parse(&std::fs::read_to_string("sequence_01/pcalib.txt")?)?;
-let v = Vignette::from_u16(&dataset_io::read_gray_map("sequence_01/vignette.png".as_ref())?.0)?;
-let size = seq.image_size();
-let corr = Correction::new(&u, Some(&v), None, (size.width, size.height), true)?;
-for k in seq.indices(0..seq.len(), true) {                          // backwards
-    let f = seq.frame(k)?;
-    let irradiance = corr.correct(&f.image, f.exposure_ms)?;        // U(I) / (t V), NaN where saturated
-}
-    Ok(())
-}
-
 fn repo() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Every ```rust block of the README is one of the examples above, unchanged.
+/// The README's Rust examples are doctests of monovo-pipelines (`cargo test --doc`); this
+/// checks that they stay there: three `rust,no_run` blocks, each a whole program.
 #[test]
-fn readme_rust_examples_are_the_compiled_ones() {
+fn readme_rust_examples_are_doctests() {
     let readme = std::fs::read_to_string(repo().join("README.md")).unwrap();
-    let this = include_str!("readme.rs");
-    let mut blocks = 0;
-    let mut rest = readme.as_str();
-    while let Some(start) = rest.find("```rust\n") {
-        let body = &rest[start + "```rust\n".len()..];
-        let end = body.find("```").unwrap();
-        assert!(
-            this.contains(&body[..end]),
-            "a README example is not compiled in tests/it/readme.rs:\n{}",
-            &body[..end]
-        );
-        blocks += 1;
-        rest = &body[end + 3..];
+    let blocks: Vec<&str> = readme.split("```rust").skip(1).collect();
+    assert_eq!(blocks.len(), 3, "examples in the README");
+    for b in blocks {
+        assert!(b.starts_with(",no_run\n") && b.contains("fn main()"), "{b}");
     }
-    assert_eq!(blocks, 3, "examples in the README");
+    let lib = std::fs::read_to_string(repo().join("crates/pipelines/src/lib.rs")).unwrap();
+    assert!(lib.contains("include_str!(\"../../../README.md\")"));
+    assert!(readme.contains(CAMERA_EXAMPLE_LINE));
 }
+
+/// A line of the camera example below, as the README has it.
+const CAMERA_EXAMPLE_LINE: &str =
+    "let map = RectifyMap::for_mode(&file.input, file.input_size, &file.output, file.output_size)?;";
 
 /// The camera example runs as written from the repository's root (where `data/` is). No
 /// other test of this binary depends on the working directory.

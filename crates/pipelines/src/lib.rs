@@ -51,3 +51,9 @@ pub use inspect::{inspect_sequence, read_vignette, SequenceInfo};
 pub use monovo_figures as figures;
 pub use observe::{Observer, Silent};
 pub use paper::{cumulative_chart, method_medians, metric_study_figure, MethodMedians};
+
+/// The README's Rust examples, compiled as doctests of this crate (which depends on every
+/// crate they use).
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct ReadmeDoctests;
