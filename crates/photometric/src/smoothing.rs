@@ -5,8 +5,10 @@
 //! whatever the width), weighted by the inverse variance of each pixel.
 //!
 //! The width is chosen by cross-validation between two independent halves of the data (the
-//! maps from the odd and from the even frames): the width whose smoothing of one half best
-//! predicts the other half, then scaled by `2^(-1/6)` for the full data (the optimal width
+//! maps from the odd and from the even frames): the widest whose smoothing of one half
+//! predicts the other half within one standard error of the best prediction (the
+//! one-standard-error rule: widths whose scores differ by less than the scores' noise are
+//! not told apart by the data), then scaled by `2^(-1/6)` for the full data (the optimal width
 //! of a local-linear smoother in two dimensions shrinks as the sixth root of the amount of
 //! data).
 
@@ -281,36 +283,54 @@ pub(crate) fn choose_smoothing(
     let (radius, cross_validated) = match fixed {
         Some(s) => (radius_for_sigma(s.max(0.0)), false),
         None => {
-            let mut best = (f64::INFINITY, 0usize);
+            // each candidate's score (mean squared prediction error) and its standard error
+            let mut scored: Vec<(usize, f64, f64)> = Vec::new();
             let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
             for &r in &candidates {
                 let (so, _) = local_linear(odd, &wt, w, h, r, false);
                 let (se, _) = local_linear(even, &wt, w, h, r, false);
-                let mut s = 0.0;
-                let mut cnt = 0.0;
+                let (mut s, mut s2, mut cnt) = (0.0, 0.0, 0.0);
                 for i in 0..n {
                     if odd[i].is_finite() && even[i].is_finite() && wt[i] > 0.0 {
-                        if so[i].is_finite() {
-                            s += (so[i] - even[i]).powi(2) * wt[i] / 2.0;
-                            cnt += 1.0;
-                        }
-                        if se[i].is_finite() {
-                            s += (se[i] - odd[i]).powi(2) * wt[i] / 2.0;
-                            cnt += 1.0;
+                        for (pred, other) in [(so[i], even[i]), (se[i], odd[i])] {
+                            if pred.is_finite() {
+                                let c = (pred - other).powi(2) * wt[i] / 2.0;
+                                s += c;
+                                s2 += c * c;
+                                cnt += 1.0;
+                            }
                         }
                     }
                 }
-                let score = if cnt > 0.0 { s / cnt } else { f64::INFINITY };
+                let (score, sem) = if cnt > 1.0 {
+                    let mean = s / cnt;
+                    let var = (s2 / cnt - mean * mean).max(0.0);
+                    (mean, (var / (cnt - 1.0)).sqrt())
+                } else {
+                    (f64::INFINITY, 0.0)
+                };
                 scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
-                if score < best.0 {
-                    best = (score, r);
-                }
+                scored.push((r, score, sem));
             }
-            if !best.0.is_finite() {
+            let Some(&(_, min_score, min_sem)) = scored
+                .iter()
+                .filter(|c| c.1.is_finite())
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+            else {
                 return Err(PhotometricError::Calibration(
                     "the odd and the even frames see no pixel in common; the smoothing cannot be chosen (record more frames)".into(),
                 ));
-            }
+            };
+            // the one-standard-error rule: the widest candidate whose score is within one
+            // standard error of the best; scores that differ by less than their noise do not
+            // decide (neighbouring widths often tie, and the argmin would flip between them)
+            let best = scored
+                .iter()
+                .filter(|c| c.1 <= min_score + min_sem)
+                .map(|c| c.0)
+                .max()
+                .unwrap_or(0);
+            let best = (min_score, best);
             // the full data: a kernel 2^(-1/6) as wide
             let s_half = if best.1 == 0 {
                 0.0
