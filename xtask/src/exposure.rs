@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use camera_model::Image;
 use photometric::exposure::{
     check_exposures, estimate_exposures, measure_ratio, ExposureMeter, ExposureOptions,
-    MeteredFrame, PairRatio, RatioMeasurement,
+    MeteredFrame, PairRatio,
 };
 use synthetic::scene::{shift_exposure_log, ExposureMode, SequenceConfig, SyntheticSequence};
 use synthetic::sensor::{NoiseLevel, Sensor};
@@ -50,24 +50,6 @@ fn median_abs_error(est: &[f64], truth: &[f64]) -> f64 {
     }
     d.sort_by(f64::total_cmp);
     d[d.len() / 2]
-}
-
-fn pairs_of(consecutive: &[RatioMeasurement], skip: &[RatioMeasurement]) -> Vec<PairRatio> {
-    let mut pairs: Vec<PairRatio> = consecutive
-        .iter()
-        .enumerate()
-        .map(|(i, m)| PairRatio {
-            from: i,
-            to: i + 1,
-            measurement: m.clone(),
-        })
-        .collect();
-    pairs.extend(skip.iter().enumerate().map(|(i, m)| PairRatio {
-        from: i,
-        to: i + 2,
-        measurement: m.clone(),
-    }));
-    pairs
 }
 
 fn run_seed(seed: u64, c: &StudyConfig, opts: &ExposureOptions) -> Result<SeedResult> {
@@ -141,12 +123,12 @@ fn run_seed(seed: u64, c: &StudyConfig, opts: &ExposureOptions) -> Result<SeedRe
             f.verdict, f.logged_ms, f.predicted_ms, seq.exposures_ms[*k], f.note
         );
     }
-    let est = estimate_exposures(c.frames, &pairs_of(&consecutive, &skip), 10.0, opts)?;
+    let est = estimate_exposures(c.frames, &PairRatio::chain(&consecutive, &skip), 10.0, opts)?;
     let median_error = median_abs_error(&est.exposures_ms, &seq.exposures_ms);
     // the exploring loop alone: frames between the path's cuts
     let k = seq.path.segment_frames;
     let inner = k + 1..c.frames - k - 1;
-    let inner_pairs: Vec<PairRatio> = pairs_of(&consecutive, &skip)
+    let inner_pairs: Vec<PairRatio> = PairRatio::chain(&consecutive, &skip)
         .into_iter()
         .filter(|p| inner.contains(&p.from) && inner.contains(&p.to))
         .map(|mut p| {

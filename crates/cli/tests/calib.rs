@@ -521,21 +521,11 @@ fn twelve_bit_vignette_end_to_end() {
         stdout(&o)
     );
     let read = |p: &std::path::Path| {
-        let (img, _) = dataset_io::read_gray16(p).unwrap();
-        let max = *img.data().iter().max().unwrap() as f64;
-        img.data()
-            .iter()
-            .map(|&v| v as f64 / max)
-            .collect::<Vec<f64>>()
+        let map = dataset_io::read_gray_map(p).unwrap().0;
+        photometric::Vignette::from_u16(&map).unwrap()
     };
     let (got, truth) = (read(&out), read(&set.join("truth_vignette.png")));
-    let rms = (got
-        .iter()
-        .zip(&truth)
-        .map(|(g, t)| ((g - t) / t).powi(2))
-        .sum::<f64>()
-        / got.len() as f64)
-        .sqrt();
+    let (rms, _) = photometric::vignette_errors(got.values().data(), truth.values().data());
     assert!(rms < 0.003, "RMS relative error {rms}");
     // the same 12-bit values in the high bits of the samples
     let high = d.join("wall_high");
@@ -543,24 +533,16 @@ fn twelve_bit_vignette_end_to_end() {
     for f in ["times.txt", "camera.txt", "pcalib.txt"] {
         std::fs::copy(set.join(f), high.join(f)).unwrap();
     }
-    let mut zin =
-        zip::ZipArchive::new(std::fs::File::open(set.join("images.zip")).unwrap()).unwrap();
-    let mut zout = zip::ZipWriter::new(std::fs::File::create(high.join("images.zip")).unwrap());
-    for i in 0..zin.len() {
-        let mut entry = zin.by_index(i).unwrap();
-        let name = entry.name().unwrap().to_string();
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut entry, &mut bytes).unwrap();
-        let (img, sixteen) = dataset_io::decode_gray16(&bytes).unwrap();
+    let low = dataset_io::Sequence::open(&set).unwrap();
+    let shifted = (0..low.len()).map(|k| {
+        let (img, sixteen) = dataset_io::decode_gray16(&low.raw(k).unwrap()).unwrap();
         assert!(sixteen);
         let (w, h) = img.size();
-        let shifted: Vec<u16> = img.data().iter().map(|&v| v << 4).collect();
-        let png = dataset_io::encode_png_u16(w, h, &shifted, dataset_io::PngSpeed::Fast).unwrap();
-        zout.start_file(name, zip::write::SimpleFileOptions::default())
-            .unwrap();
-        std::io::Write::write_all(&mut zout, &png).unwrap();
-    }
-    zout.finish().unwrap();
+        let values: Vec<u16> = img.data().iter().map(|&v| v << 4).collect();
+        let png = dataset_io::encode_png_u16(w, h, &values, dataset_io::PngSpeed::Fast).unwrap();
+        (low.names()[k].clone(), png)
+    });
+    dataset_io::write_images_zip(&high.join("images.zip"), shifted).unwrap();
     let out_high = d.join("v_high.png");
     let o = monovo(&[
         "calib",

@@ -430,7 +430,8 @@ pub struct RatioMeasurement {
 }
 
 impl RatioMeasurement {
-    fn failed(note: impl Into<String>) -> RatioMeasurement {
+    /// A measurement that could not be made: no ratio, unreliable, with the reason.
+    pub fn failed(note: impl Into<String>) -> RatioMeasurement {
         RatioMeasurement {
             log_ratio: f64::NAN,
             std_error: f64::INFINITY,
@@ -960,6 +961,26 @@ pub struct PairRatio {
     pub measurement: RatioMeasurement,
 }
 
+impl PairRatio {
+    /// The pairs of a sequence's measurements for [`estimate_exposures`]: `consecutive[i]`
+    /// links frames `i` and `i + 1`, `skip[i]` frames `i` and `i + 2`.
+    pub fn chain(consecutive: &[RatioMeasurement], skip: &[RatioMeasurement]) -> Vec<PairRatio> {
+        let pair = |step: usize| {
+            move |(i, m): (usize, &RatioMeasurement)| PairRatio {
+                from: i,
+                to: i + step,
+                measurement: m.clone(),
+            }
+        };
+        consecutive
+            .iter()
+            .enumerate()
+            .map(pair(1))
+            .chain(skip.iter().enumerate().map(pair(2)))
+            .collect()
+    }
+}
+
 /// What [`check_exposures`] concludes about one frame's logged exposure.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -1220,15 +1241,7 @@ pub fn check_exposures(
         })
         .collect();
     // the measured exposures alone, scaled to the logged ones
-    let pairs: Vec<PairRatio> = ratios
-        .iter()
-        .enumerate()
-        .map(|(i, m)| PairRatio {
-            from: i,
-            to: i + 1,
-            measurement: m.clone(),
-        })
-        .collect();
+    let pairs = PairRatio::chain(ratios, &[]);
     let est = estimate_exposures(n, &pairs, 1.0, opts)?;
     // each stretch between gaps (where no ratio links the frames) scaled to its logs
     let mut measured_ms = Vec::with_capacity(n);

@@ -330,12 +330,11 @@ pub(crate) fn choose_smoothing(
                 .map(|c| c.0)
                 .max()
                 .unwrap_or(0);
-            let best = (min_score, best);
             // the full data: a kernel 2^(-1/6) as wide
-            let s_half = if best.1 == 0 {
+            let s_half = if best == 0 {
                 0.0
             } else {
-                sigma_of_radius(best.1)
+                sigma_of_radius(best)
             };
             (radius_for_sigma(s_half * 2f64.powf(-1.0 / 6.0)), true)
         }

@@ -379,13 +379,6 @@ impl Problem<'_> {
         };
         let exposure_ms = frame.exposure_ms;
         let samples = frame.image.into_samples();
-        let top = self.top();
-        if let Some(&v) = samples.iter().find(|&&v| v > top) {
-            return Err(PhotometricError::Calibration(format!(
-                "frame {i} has the value {v}, more than a {}-bit sample holds (at most {top}); if the values are in the high bits of the 16-bit samples, shift them down or use bit depth 16",
-                self.u.len().trailing_zeros()
-            )));
-        }
         Ok(Some(Prepared {
             samples,
             exposure_ms,
@@ -1410,6 +1403,15 @@ fn check_frame(
             "frame {i} has {bits}-bit samples, frame 0 has {}-bit samples; every frame of a calibration has the same bit depth",
             levels.trailing_zeros()
         )));
+    }
+    // (8-bit samples always fit)
+    if let PlaneImage::U16 { image, .. } = &f.image {
+        let top = (levels - 1) as u16;
+        if let Some(&v) = image.data().iter().find(|&&v| v > top) {
+            return Err(PhotometricError::Calibration(format!(
+                "frame {i} has the value {v}, more than a {bits}-bit sample holds (at most {top}); if the values are in the high bits of the 16-bit samples, shift them down or use bit depth 16"
+            )));
+        }
     }
     if !(f.exposure_ms.is_finite() && f.exposure_ms > 0.0) {
         return Err(PhotometricError::Exposure(f.exposure_ms));

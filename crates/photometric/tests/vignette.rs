@@ -7,8 +7,10 @@ use photometric::{
 use synthetic::plane::{PlaneConfig, PlaneSequence};
 use synthetic::sensor::{NoiseLevel, Sensor};
 
+/// Frames of a synthetic plane sequence (8-bit, or deeper samples in 16 bits) with their
+/// true poses.
 struct Frames {
-    images: Vec<Image<u8>>,
+    images: Vec<PlaneImage>,
     seq: PlaneSequence,
 }
 
@@ -19,7 +21,7 @@ impl PlaneFrames for Frames {
     fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError> {
         let p = self.seq.poses[i];
         Ok(PlaneFrame {
-            image: self.images[i].clone().into(),
+            image: self.images[i].clone(),
             exposure_ms: self.seq.exposures_ms[i],
             pose: PlanePose { r: p.r, t: p.t },
         })
@@ -39,19 +41,27 @@ fn set(seed: u64, w: usize, h: usize, n: usize, sensor: Sensor) -> Frames {
     );
     Frames {
         images: (0..n)
-            .map(|i| Image::new(w, h, seq.frame(i).unwrap()).unwrap())
+            .map(|i| Image::new(w, h, seq.frame(i).unwrap()).unwrap().into())
             .collect(),
         seq,
     }
 }
 
+/// Calibrates with the sequence's true 8-bit response.
 fn calibrate(f: &Frames) -> Result<VignetteCalibration, PhotometricError> {
+    calibrate_with(f, &InverseResponse::new(f.seq.response).unwrap())
+}
+
+fn calibrate_with(
+    f: &Frames,
+    response: &InverseResponse,
+) -> Result<VignetteCalibration, PhotometricError> {
     let (w, h) = (f.seq.config.width, f.seq.config.height);
     let cam = CameraFile::parse(&f.seq.camera.camera_txt((w, h))).unwrap();
     calibrate_vignette(
         &cam.input,
         ImageSize::new(w, h),
-        &InverseResponse::new(f.seq.response).unwrap(),
+        response,
         f,
         &VignetteOptions::default(),
         &|_, _| {},
@@ -138,7 +148,11 @@ fn an_uncovered_corner_is_refused() {
         p.t = [p.t[0] * 3.0, p.t[1] * 3.0, p.t[2] * 3.0];
     }
     f.images = (0..30)
-        .map(|i| Image::new(160, 128, f.seq.frame(i).unwrap()).unwrap())
+        .map(|i| {
+            Image::new(160, 128, f.seq.frame(i).unwrap())
+                .unwrap()
+                .into()
+        })
         .collect();
     let e = calibrate(&f).unwrap_err();
     assert!(e.to_string().contains("corner"), "{e}");
@@ -164,30 +178,7 @@ fn no_frames_no_plane_bad_exposure() {
 }
 
 /// Frames of a `bits`-bit sensor (16-bit samples) over the same scene as [`set`].
-struct DeepFrames {
-    images: Vec<Image<u16>>,
-    bits: u32,
-    seq: PlaneSequence,
-}
-
-impl PlaneFrames for DeepFrames {
-    fn len(&self) -> usize {
-        self.images.len()
-    }
-    fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError> {
-        let p = self.seq.poses[i];
-        Ok(PlaneFrame {
-            image: PlaneImage::U16 {
-                image: self.images[i].clone(),
-                bits: self.bits,
-            },
-            exposure_ms: self.seq.exposures_ms[i],
-            pose: PlanePose { r: p.r, t: p.t },
-        })
-    }
-}
-
-fn deep_set(seed: u64, w: usize, h: usize, n: usize, noise: NoiseLevel, bits: u32) -> DeepFrames {
+fn deep_set(seed: u64, w: usize, h: usize, n: usize, noise: NoiseLevel, bits: u32) -> Frames {
     let seq = PlaneSequence::new(
         seed,
         PlaneConfig {
@@ -198,29 +189,15 @@ fn deep_set(seed: u64, w: usize, h: usize, n: usize, noise: NoiseLevel, bits: u3
             ..PlaneConfig::default()
         },
     );
-    DeepFrames {
+    Frames {
         images: (0..n)
-            .map(|i| Image::new(w, h, seq.render_deep(i, bits)).unwrap())
+            .map(|i| PlaneImage::U16 {
+                image: Image::new(w, h, seq.render_deep(i, bits)).unwrap(),
+                bits,
+            })
             .collect(),
-        bits,
         seq,
     }
-}
-
-fn calibrate_deep(
-    f: &DeepFrames,
-    response: &InverseResponse,
-) -> Result<VignetteCalibration, PhotometricError> {
-    let (w, h) = (f.seq.config.width, f.seq.config.height);
-    let cam = CameraFile::parse(&f.seq.camera.camera_txt((w, h))).unwrap();
-    calibrate_vignette(
-        &cam.input,
-        ImageSize::new(w, h),
-        response,
-        f,
-        &VignetteOptions::default(),
-        &|_, _| {},
-    )
 }
 
 /// A 12-bit sensor (values in the low bits of 16-bit samples, the 4096-value table) over
@@ -232,7 +209,7 @@ fn twelve_bit_frames_calibrate_with_the_deep_table() {
     for noise in [NoiseLevel::Typical, NoiseLevel::High] {
         let f = deep_set(seed, 240, 192, 80, noise, 12);
         let response = InverseResponse::from_values(f.seq.response_bits(12)).unwrap();
-        let cal = calibrate_deep(&f, &response).unwrap();
+        let cal = calibrate_with(&f, &response).unwrap();
         let truth = &f.seq.vignette;
         let (rms, _) = vignette_errors(cal.vignette.data(), truth);
         let (raw, valid) = vignette_errors(cal.raw.data(), truth);
@@ -297,40 +274,19 @@ fn twelve_bit_frames_calibrate_with_the_deep_table() {
 fn deep_frames_out_of_range_or_of_mixed_depth_are_refused() {
     let mut f = deep_set(12, 96, 80, 6, NoiseLevel::Low, 10);
     let response = InverseResponse::from_values(f.seq.response_bits(10)).unwrap();
-    f.images[3].data_mut()[17] = 1024;
-    let e = calibrate_deep(&f, &response).unwrap_err().to_string();
+    if let PlaneImage::U16 { image, .. } = &mut f.images[3] {
+        image.data_mut()[17] = 1024;
+    }
+    let e = calibrate_with(&f, &response).unwrap_err().to_string();
     assert!(
         e.contains("frame 3") && e.contains("1024") && e.contains("10-bit"),
         "{e}"
     );
-    struct Mixed(DeepFrames);
-    impl PlaneFrames for Mixed {
-        fn len(&self) -> usize {
-            self.0.len()
-        }
-        fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError> {
-            let mut fr = self.0.frame(i)?;
-            if i == 4 {
-                if let PlaneImage::U16 { bits, .. } = &mut fr.image {
-                    *bits = 12;
-                }
-            }
-            Ok(fr)
-        }
+    let mut f = deep_set(12, 96, 80, 6, NoiseLevel::Low, 10);
+    if let PlaneImage::U16 { bits, .. } = &mut f.images[4] {
+        *bits = 12;
     }
-    let f = Mixed(deep_set(12, 96, 80, 6, NoiseLevel::Low, 10));
-    let (w, h) = (96, 80);
-    let cam = CameraFile::parse(&f.0.seq.camera.camera_txt((w, h))).unwrap();
-    let e = calibrate_vignette(
-        &cam.input,
-        ImageSize::new(w, h),
-        &response,
-        &f,
-        &VignetteOptions::default(),
-        &|_, _| {},
-    )
-    .unwrap_err()
-    .to_string();
+    let e = calibrate_with(&f, &response).unwrap_err().to_string();
     assert!(
         e.contains("frame 4 has 12-bit samples, frame 0 has 10-bit"),
         "{e}"
@@ -342,17 +298,19 @@ fn deep_frames_out_of_range_or_of_mixed_depth_are_refused() {
 #[test]
 fn eight_bit_values_in_sixteen_bit_samples_give_the_same_bits() {
     let f = set(9, 160, 128, 40, Sensor::preset(NoiseLevel::Typical));
-    let deep = DeepFrames {
-        images: f
-            .images
-            .iter()
-            .map(|i| Image::new(160, 128, i.data().iter().map(|&v| v as u16).collect()).unwrap())
+    let deep = Frames {
+        images: (0..40)
+            .map(|i| PlaneImage::U16 {
+                image: Image::new(160, 128, f.seq.frame(i).unwrap())
+                    .unwrap()
+                    .map(u16::from),
+                bits: 8,
+            })
             .collect(),
-        bits: 8,
         seq: f.seq.clone(),
     };
     let a = calibrate(&f).unwrap();
-    let b = calibrate_deep(&deep, &InverseResponse::new(f.seq.response).unwrap()).unwrap();
+    let b = calibrate_with(&deep, &InverseResponse::new(f.seq.response).unwrap()).unwrap();
     let bits = |i: &Image<f32>| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     assert!(bits(&a.vignette) == bits(&b.vignette), "vignette");
     assert!(bits(&a.raw) == bits(&b.raw), "raw map");

@@ -216,7 +216,7 @@ pub fn measure(
     observer.finish();
     let fill = |v: Vec<Option<RatioMeasurement>>| -> Vec<RatioMeasurement> {
         v.into_iter()
-            .map(|m| m.unwrap_or_else(|| empty_measurement("not measured")))
+            .map(|m| m.unwrap_or_else(|| RatioMeasurement::failed("not measured")))
             .collect()
     };
     Ok(Ratios {
@@ -224,18 +224,6 @@ pub fn measure(
         skip: fill(skipped),
         seconds: start.elapsed().as_secs_f64(),
     })
-}
-
-fn empty_measurement(note: &str) -> RatioMeasurement {
-    RatioMeasurement {
-        log_ratio: f64::NAN,
-        std_error: f64::INFINITY,
-        shift: [f64::NAN; 2],
-        tiles: 0,
-        pixel_spread: f64::NAN,
-        reliable: false,
-        note: note.into(),
-    }
 }
 
 /// Lists at most `max` items, then how many more.
@@ -568,16 +556,7 @@ pub fn estimate_sequence(job: &EstimateJob, observer: &dyn Observer) -> Result<E
     }
     let (meter, bits) = meter_for(&seq, &job.input, opts, observer)?;
     let ratios = measure(&seq, &meter, bits, opts, opts.skip_pairs, observer)?;
-    let pair = |step: usize| {
-        move |(i, m): (usize, &RatioMeasurement)| PairRatio {
-            from: i,
-            to: i + step,
-            measurement: m.clone(),
-        }
-    };
-    let pairs: Vec<PairRatio> = (ratios.consecutive.iter().enumerate().map(pair(1)))
-        .chain(ratios.skip.iter().enumerate().map(pair(2)))
-        .collect();
+    let pairs = PairRatio::chain(&ratios.consecutive, &ratios.skip);
     let est = estimate_exposures(seq.len(), &pairs, job.reference_ms, opts)
         .map_err(photometric_err(job.sequence.display().to_string()))?;
     let rows = &seq.times().rows;
