@@ -326,7 +326,7 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
 /// In-memory frames of a synthetic plane sequence with their true poses.
 pub struct MemoryPlaneFrames {
     /// Rendered images.
-    pub images: Vec<Image<u8>>,
+    pub images: Vec<photometric::PlaneImage>,
     /// The truth.
     pub seq: synthetic::plane::PlaneSequence,
 }
@@ -338,9 +338,12 @@ impl photometric::PlaneFrames for MemoryPlaneFrames {
     fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, photometric::PhotometricError> {
         let p = self.seq.poses[i];
         Ok(photometric::PlaneFrame {
-            image: self.images[i].clone().into(),
+            image: self.images[i].clone(),
             exposure_ms: self.seq.exposures_ms[i],
             pose: photometric::PlanePose { r: p.r, t: p.t },
         })
+    }
+    fn samples_in_memory(&self, i: usize) -> Option<&photometric::PlaneImage> {
+        self.images.get(i)
     }
 }

@@ -74,7 +74,10 @@ pub fn run(
     let cam = CameraFile::parse(&seq.camera.camera_txt((w, h)))?;
     let resp = photometric::InverseResponse::new(seq.response)?;
     let truth = seq.vignette.clone();
-    let mut src = MemoryPlaneFrames { images, seq };
+    let mut src = MemoryPlaneFrames {
+        images: images.into_iter().map(Into::into).collect(),
+        seq,
+    };
     let mut found = n;
     if detect {
         let map = RectifyMap::for_mode(
@@ -86,7 +89,10 @@ pub fn run(
         let k = map.camera();
         let mut keep = Vec::new();
         for i in 0..n {
-            let rect = map.remap_u8(&src.images[i])?;
+            let photometric::PlaneImage::U8(image) = &src.images[i] else {
+                anyhow::bail!("the synthetic vignette set has 8-bit frames");
+            };
+            let rect = map.remap_u8(image)?;
             let det: Vec<_> = photometric::marker::detect_markers(&rect)
                 .into_iter()
                 .filter(|d| d.id == 213)

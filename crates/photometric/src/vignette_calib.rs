@@ -11,8 +11,9 @@
 //!   Observations far beyond their noise are dropped once the fit has settled.
 //! * **Solved to convergence**: block updates of `V` (exact per pixel) and of `C` (a Jacobi
 //!   step on the exact bilinear least-squares problem), accelerated by Anderson mixing,
-//!   until the relative change of `V` is below the tolerance. Frames are streamed: memory
-//!   does not grow with their number.
+//!   until the relative change of `V` is below the tolerance, or below a small fraction of
+//!   the raw map's standard error (the iteration's error is then far below the noise's).
+//!   Frames are streamed: memory does not grow with their number.
 //! * **Observable or refused**: the pixel-cell graph (two unknowns joined when one observation
 //!   links them) must be connected, else the scale of `V` differs between its parts and the
 //!   paper's argument for a unique solution fails; image corners the plane never covers are
@@ -73,14 +74,6 @@ impl PlaneImage {
             PlaneImage::U16 { bits, .. } => *bits,
         }
     }
-
-    /// The samples as 16-bit values (8-bit ones widened).
-    fn into_samples(self) -> Vec<u16> {
-        match self {
-            PlaneImage::U8(i) => i.data().iter().map(|&v| v as u16).collect(),
-            PlaneImage::U16 { image, .. } => image.into_data(),
-        }
-    }
 }
 
 impl From<Image<u8>> for PlaneImage {
@@ -110,6 +103,13 @@ pub trait PlaneFrames: Sync {
     }
     /// Frame `i`.
     fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError>;
+    /// Frame `i`'s samples, if the source keeps them in memory (the same as
+    /// `frame(i)?.image`). When every frame's are, the calibration visits the data once per
+    /// iteration instead of twice, in an order that needs them all at hand. `None` (the
+    /// default): the frames are decoded on demand.
+    fn samples_in_memory(&self, _i: usize) -> Option<&PlaneImage> {
+        None
+    }
 }
 
 /// Options of [`calibrate_vignette`].
@@ -122,6 +122,10 @@ pub struct VignetteOptions {
     pub max_iterations: usize,
     /// Stop when the RMS relative change of `V` between iterations is below this.
     pub tolerance: f64,
+    /// Stop as well when the RMS relative change of `V` is below this fraction of the
+    /// median standard error of the raw (per-pixel) map: the error left by the iteration is
+    /// then far below the statistical one (0: only `tolerance` decides).
+    pub noise_tolerance: f64,
     /// Plane grid resolution (cells per side).
     pub grid: usize,
     /// Plane grid side in marker widths.
@@ -144,6 +148,7 @@ impl Default for VignetteOptions {
         VignetteOptions {
             max_iterations: 100,
             tolerance: 2e-5,
+            noise_tolerance: 0.03,
             grid: 1000,
             extent: 5.0,
             outlier_sigmas: 5.0,
@@ -179,6 +184,13 @@ impl VignetteOptions {
                 "tolerance",
                 self.tolerance.to_string(),
                 "a finite relative change, 0 or more",
+            );
+        }
+        if !non_negative(self.noise_tolerance) || self.noise_tolerance > 1.0 {
+            return bad(
+                "noise_tolerance",
+                self.noise_tolerance.to_string(),
+                "a fraction of the standard error from 0 to 1",
             );
         }
         if !(8..=4096).contains(&self.grid) {
@@ -307,36 +319,35 @@ fn cells(grid: usize) -> usize {
     grid.div_ceil(8) * grid.div_ceil(8) * 64
 }
 
-/// The bilinear taps of grid position `g`: storage indices and weights, and the fractions.
-#[inline]
-fn taps(g: [f64; 2], grid: usize) -> ([usize; 4], [f64; 4], f64, f64) {
-    // g is non-negative: truncation is the floor
-    let x0 = (g[0] as usize).min(grid - 2);
-    let y0 = (g[1] as usize).min(grid - 2);
-    let (fx, fy) = (g[0] - x0 as f64, g[1] - y0 as f64);
-    (
-        [
-            cell(x0, y0, grid),
-            cell(x0 + 1, y0, grid),
-            cell(x0, y0 + 1, grid),
-            cell(x0 + 1, y0 + 1, grid),
-        ],
-        [
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        ],
-        fx,
-        fy,
-    )
+/// The samples of a frame, row-major.
+enum Samples {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+}
+
+impl Samples {
+    fn get(&self, i: usize) -> u16 {
+        match self {
+            Samples::U8(d) => d[i] as u16,
+            Samples::U16(d) => d[i],
+        }
+    }
 }
 
 /// One frame prepared for the passes.
 struct Prepared {
     /// The raw samples (checked to be at most the problem's `top`).
-    samples: Vec<u16>,
+    samples: Samples,
+    /// Their bit depth.
+    bits: u32,
+    geom: Geom,
+}
+
+/// What a pass needs of a frame besides its samples.
+#[derive(Clone, Copy)]
+struct Geom {
     exposure_ms: f64,
+    /// The frame's [`ray_to_grid`] matrix.
     m: [[f64; 3]; 3],
     /// Grid cells per pixel at the image centre (scales the registration error).
     cells_per_px: f64,
@@ -349,6 +360,9 @@ struct Problem<'a> {
     /// The pixels the problem has, as indices into the image (all of them, or a coarse
     /// sample); `V` is indexed by their position here.
     sample: Vec<u32>,
+    /// The order in which the passes visit the sample (positions in it): image tiles of
+    /// [`TILE`] pixels a side, row by row (see [`tile_order`]).
+    order: Vec<u32>,
     size: ImageSize,
     /// `U` at every sample value of the frames' bit depth.
     u: &'a [f64],
@@ -378,12 +392,19 @@ impl Problem<'_> {
             _ => 1.0,
         };
         let exposure_ms = frame.exposure_ms;
-        let samples = frame.image.into_samples();
+        let bits = frame.image.bits();
+        let samples = match frame.image {
+            PlaneImage::U8(i) => Samples::U8(i.into_data()),
+            PlaneImage::U16 { image, .. } => Samples::U16(image.into_data()),
+        };
         Ok(Some(Prepared {
             samples,
-            exposure_ms,
-            m,
-            cells_per_px,
+            bits,
+            geom: Geom {
+                exposure_ms,
+                m,
+                cells_per_px,
+            },
         }))
     }
 }
@@ -434,6 +455,33 @@ impl VSums {
         }
     }
 
+    /// Adds `o`, whose per-pixel sums are those of the pixels from `offset` on.
+    fn add_range(&mut self, o: &VSums, offset: usize) {
+        let n = o.num.len();
+        let r = offset..offset + n;
+        self.num[r.clone()].copy_from_slice(&o.num);
+        self.den[r.clone()].copy_from_slice(&o.den);
+        self.num_odd[r.clone()].copy_from_slice(&o.num_odd);
+        self.den_odd[r.clone()].copy_from_slice(&o.den_odd);
+        self.counts[r].copy_from_slice(&o.counts);
+        self.add_statistics(o);
+    }
+
+    /// Adds the residual statistics of `o`.
+    fn add_statistics(&mut self, o: &VSums) {
+        for (a, b) in self.rss.iter_mut().zip(&o.rss) {
+            *a += b;
+        }
+        for (a, b) in self.rcnt.iter_mut().zip(&o.rcnt) {
+            *a += b;
+        }
+        self.chi2 += o.chi2;
+        self.nobs += o.nobs;
+        self.pred2 += o.pred2;
+        self.res2 += o.res2;
+        self.outliers += o.outliers;
+    }
+
     fn add(&mut self, o: &VSums) {
         for (a, b) in self.num.iter_mut().zip(&o.num) {
             *a += b;
@@ -450,17 +498,7 @@ impl VSums {
         for (a, b) in self.counts.iter_mut().zip(&o.counts) {
             *a += b;
         }
-        for (a, b) in self.rss.iter_mut().zip(&o.rss) {
-            *a += b;
-        }
-        for (a, b) in self.rcnt.iter_mut().zip(&o.rcnt) {
-            *a += b;
-        }
-        self.chi2 += o.chi2;
-        self.nobs += o.nobs;
-        self.pred2 += o.pred2;
-        self.res2 += o.res2;
-        self.outliers += o.outliers;
+        self.add_statistics(o);
     }
 }
 
@@ -506,26 +544,35 @@ impl Tables {
 /// Parallel jobs of a pass over the frames: consecutive frames share their accumulators.
 const FRAME_JOBS: usize = 8;
 
-/// The frames of each job: a partition of the frames that does not depend on the number of
-/// threads, so that every sum is taken in the same order with any number of threads.
-fn frame_jobs(n: usize) -> Vec<std::ops::Range<usize>> {
-    let jobs = FRAME_JOBS.clamp(1, n.max(1));
-    let per = n.div_ceil(jobs);
-    (0..jobs)
-        .map(|j| (j * per).min(n)..((j + 1) * per).min(n))
-        .filter(|r| !r.is_empty())
-        .collect()
+/// The decoded frames one job holds at a time stay under this many bytes (at least one
+/// frame per job): memory does not grow with the number of frames.
+const JOB_FRAME_BYTES: usize = 32 << 20;
+
+/// Pixels per block of a pass: the pass visits every frame of its job for one block of
+/// pixels before the next, so that the block's sums, rays and `V` stay in the core's cache
+/// while the frames stream by (frame by frame, these per-pixel arrays would come from
+/// memory once per frame).
+const PIXEL_BLOCK: usize = 4096;
+
+/// The frames of each job: a partition of the frames that depends on their number and size
+/// only, not on the number of threads, so that every sum is taken in the same order with
+/// any number of threads.
+fn frame_jobs(n: usize, frame_bytes: usize) -> Vec<std::ops::Range<usize>> {
+    let per = n
+        .div_ceil(FRAME_JOBS)
+        .min(JOB_FRAME_BYTES / frame_bytes.max(1))
+        .max(1);
+    (0..n).step_by(per).map(|s| s..(s + per).min(n)).collect()
 }
 
 /// Runs `job` on the frames of every job of [`frame_jobs`], as many at a time as there are
 /// threads, and hands the results to `add` in the order of the jobs: the same bits with one
 /// thread or many, and at most one job's accumulators per thread in memory.
 fn fold_frame_jobs<T: Send>(
-    n: usize,
+    jobs: &[std::ops::Range<usize>],
     job: impl Fn(std::ops::Range<usize>) -> Result<T, PhotometricError> + Sync,
     mut add: impl FnMut(T),
 ) -> Result<(), PhotometricError> {
-    let jobs = frame_jobs(n);
     let wave = rayon::current_num_threads().max(1);
     for chunk in jobs.chunks(wave) {
         let parts: Vec<T> = chunk
@@ -537,109 +584,540 @@ fn fold_frame_jobs<T: Send>(
     Ok(())
 }
 
+/// Which sums a pass takes.
+#[derive(Clone, Copy, PartialEq)]
+enum Step {
+    /// The V step's per-pixel sums and the residual statistics.
+    V,
+    /// The C step's per-cell sums.
+    C,
+}
+
+/// What one pass holds fixed: the problem, the model, the noise tables and the constants
+/// of the weights.
+struct PassCtx<'a, 'p> {
+    p: &'a Problem<'p>,
+    model: &'a Model,
+    tables: &'a Tables,
+    reg2: f64,
+    out2: f64,
+    top: u16,
+    step: Step,
+    tiles_x: usize,
+}
+
+/// The sums of one job: the V step's per pixel, or the C step's per cell.
+struct JobSums {
+    v: VSums,
+    cnum: Vec<f32>,
+    cden: Vec<f32>,
+}
+
+/// Observations per batch of a pass's stages.
+const BATCH: usize = 256;
+
+/// The observations of one batch of pixels of one frame, stage by stage (structure of
+/// arrays): each stage is a short loop whose iterations do not depend on each other, so
+/// that the core overlaps them and the compiler can use vector instructions (one loop doing
+/// all of an observation's work in a row waits on a chain of divisions, loads and table
+/// lookups).
+struct Batch {
+    /// Plane grid coordinates of every pixel of the batch, and whether they are inside.
+    gx: Vec<f64>,
+    gy: Vec<f64>,
+    inside: Vec<bool>,
+    /// The observations kept (the first `n` entries): the pixel's position in the problem's
+    /// sample, the sample value, the storage indices of the four bilinear taps, and the
+    /// fractions of the position between them.
+    n: usize,
+    pos: Vec<u32>,
+    k: Vec<u16>,
+    idx: Vec<[u32; 4]>,
+    frac: Vec<[f64; 2]>,
+    /// `C` at the position, and the squared norm of its gradient (per cell).
+    cq: Vec<f64>,
+    grad2: Vec<f64>,
+}
+
+impl Batch {
+    fn new() -> Batch {
+        Batch {
+            gx: vec![0.0; BATCH],
+            gy: vec![0.0; BATCH],
+            inside: vec![false; BATCH],
+            n: 0,
+            pos: vec![0; BATCH],
+            k: vec![0; BATCH],
+            idx: vec![[0; 4]; BATCH],
+            frac: vec![[0.0; 2]; BATCH],
+            cq: vec![0.0; BATCH],
+            grad2: vec![0.0; BATCH],
+        }
+    }
+}
+
+impl PassCtx<'_, '_> {
+    /// The observations of frame `pf` (frame `i`) at the pixels `block` (positions in the
+    /// problem's sample) into `acc`.
+    fn observe<S: Copy + Into<u16>>(
+        &self,
+        i: usize,
+        pf: &Geom,
+        data: &[S],
+        block: &[u32],
+        acc: &mut JobSums,
+        b: &mut Batch,
+    ) {
+        for chunk in block.chunks(BATCH) {
+            self.stages(pf, data, chunk, b);
+            // stage 4: the weighted residuals into the sums
+            match self.step {
+                Step::V => self.v_sums(i, pf, b, &mut acc.v, 0, None),
+                Step::C => self.c_sums(pf, b, acc),
+            }
+        }
+    }
+
+    /// Stages 1 to 3 of the observations of frame `pf` at the pixels `chunk` (at most
+    /// [`BATCH`] positions in the problem's sample) into `b`.
+    fn stages<S: Copy + Into<u16>>(&self, pf: &Geom, data: &[S], chunk: &[u32], b: &mut Batch) {
+        let p = self.p;
+        let grid = p.grid;
+        let g_last = (grid - 1) as f64;
+        let g_max = (grid - 2) as f64;
+        let m = &pf.m;
+        {
+            // stage 1: the rays' positions on the plane (H^-1 ray, see ray_to_grid)
+            for (j, &pos) in chunk.iter().enumerate() {
+                let r = p.rays[p.sample[pos as usize] as usize];
+                let r = [r[0] as f64, r[1] as f64, r[2] as f64];
+                let w = m[2][0] * r[0] + m[2][1] * r[1] + m[2][2] * r[2];
+                let iw = 1.0 / w;
+                let gx = (m[0][0] * r[0] + m[0][1] * r[1] + m[0][2] * r[2]) * iw;
+                let gy = (m[1][0] * r[0] + m[1][1] * r[1] + m[1][2] * r[2]) * iw;
+                // in front of the camera (w = 1 / depth > 0) and inside the grid; NaN fails
+                b.inside[j] = w > 1e-12 && gx >= 0.0 && gy >= 0.0 && gx <= g_last && gy <= g_last;
+                b.gx[j] = gx;
+                b.gy[j] = gy;
+            }
+            // stage 2: the observations kept (not saturated, on the plane) and their taps
+            let mut n = 0;
+            for (j, &pos) in chunk.iter().enumerate() {
+                let k: u16 = data[p.sample[pos as usize] as usize].into();
+                if k == self.top || !b.inside[j] {
+                    continue;
+                }
+                let (gx, gy) = (b.gx[j], b.gy[j]);
+                // non-negative: truncation is the floor
+                let x0 = gx.min(g_max) as u32 as usize;
+                let y0 = gy.min(g_max) as u32 as usize;
+                let at = cell(x0, y0, grid);
+                // the neighbours, across tile borders where x0 or y0 ends a tile
+                let dx = if x0 & 7 == 7 { 57 } else { 1 };
+                let dy = if y0 & 7 == 7 {
+                    self.tiles_x * 64 - 56
+                } else {
+                    8
+                };
+                b.pos[n] = pos;
+                b.k[n] = k;
+                b.idx[n] = [
+                    at as u32,
+                    (at + dx) as u32,
+                    (at + dy) as u32,
+                    (at + dy + dx) as u32,
+                ];
+                b.frac[n] = [gx - x0 as f64, gy - y0 as f64];
+                n += 1;
+            }
+            b.n = n;
+            // stage 3: C there and its gradient
+            let c = &self.model.c;
+            for j in 0..n {
+                let (idx, [fx, fy]) = (b.idx[j], b.frac[j]);
+                let c0 = c[idx[0] as usize] as f64;
+                let c1 = c[idx[1] as usize] as f64;
+                let c2 = c[idx[2] as usize] as f64;
+                let c3 = c[idx[3] as usize] as f64;
+                let top = c0 + (c1 - c0) * fx;
+                let bottom = c2 + (c3 - c2) * fx;
+                b.cq[j] = top + (bottom - top) * fy;
+                let gx = (c1 - c0) * (1.0 - fy) + (c3 - c2) * fy;
+                let gy = bottom - top;
+                b.grad2[j] = gx * gx + gy * gy;
+            }
+        }
+    }
+
+    /// The V step's sums of a batch.
+    /// `vs` holds the pixels from position `offset` on; with `keep`, the observations that
+    /// the C step takes are kept there (`view` is the frame's index among the views).
+    #[allow(clippy::too_many_arguments)]
+    fn v_sums(
+        &self,
+        i: usize,
+        pf: &Geom,
+        b: &Batch,
+        vs: &mut VSums,
+        offset: usize,
+        mut keep: Option<(&mut Vec<Kept>, u32)>,
+    ) {
+        let (model, tables, u) = (self.model, self.tables, self.p.u);
+        let t = pf.exposure_ms;
+        let odd = i % 2 == 1;
+        let reg = self.reg2 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+        for j in 0..b.n {
+            let px = b.pos[j] as usize;
+            let (cq, vx) = (b.cq[j], model.v[px]);
+            if let Some((kept, view)) = keep.as_mut() {
+                if cq >= 0.0 {
+                    kept.push(Kept {
+                        px: b.pos[j],
+                        view: *view,
+                        k: b.k[j],
+                        idx: b.idx[j],
+                        frac: b.frac[j],
+                        cq,
+                        grad2: b.grad2[j],
+                    });
+                }
+            }
+            let px = px - offset;
+            let tv = t * vx;
+            if !(tv > 0.0 && cq > 0.0) {
+                continue;
+            }
+            let tc = t * cq;
+            let obs = u[b.k[j] as usize];
+            let pred = tc * vx;
+            let bin = tables.bin(pred);
+            // sensor noise plus the error a misregistration makes where C has edges
+            let vr = tables.var[bin] + tv * tv * b.grad2[j] * reg;
+            let r = obs - pred;
+            if model.reject && r * r > self.out2 * vr {
+                vs.outliers += 1;
+                continue;
+            }
+            let w = 1.0 / vr;
+            let wtc = w * tc;
+            vs.num[px] += wtc * obs;
+            vs.den[px] += wtc * tc;
+            if odd {
+                vs.num_odd[px] += wtc * obs;
+                vs.den_odd[px] += wtc * tc;
+            }
+            vs.counts[px] += 1;
+            vs.chi2 += r * r * w;
+            vs.nobs += 1;
+            vs.pred2 += pred * pred;
+            vs.res2 += r * r;
+            let kp = tables.grey[bin] as usize;
+            vs.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
+            vs.rcnt[kp] += 1.0;
+        }
+    }
+
+    /// The C step's sums of a batch (observations where `C` is 0 count too: the step
+    /// moves `C` from there).
+    fn c_sums(&self, pf: &Geom, b: &Batch, acc: &mut JobSums) {
+        let reg = self.reg2 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+        for j in 0..b.n {
+            let vx = self.model.v[b.pos[j] as usize];
+            let o = (b.k[j], b.idx[j], b.frac[j], b.cq[j], b.grad2[j]);
+            self.c_one(pf.exposure_ms, reg, vx, o, &mut acc.cnum, &mut acc.cden);
+        }
+    }
+
+    /// One observation's share of the C step: sample `k`, taps `idx` at fractions `frac`,
+    /// `C` there and its squared gradient, with `V = vx`.
+    #[inline]
+    fn c_one(
+        &self,
+        t: f64,
+        reg: f64,
+        vx: f64,
+        (k, idx, [fx, fy], cq, grad2): (u16, [u32; 4], [f64; 2], f64, f64),
+        cnum: &mut [f32],
+        cden: &mut [f32],
+    ) {
+        let tables = self.tables;
+        let tv = t * vx;
+        if !(tv > 0.0 && cq >= 0.0) {
+            return;
+        }
+        let obs = self.p.u[k as usize];
+        let pred = t * cq * vx;
+        let vr = tables.var[tables.bin(pred)] + tv * tv * grad2 * reg;
+        let r = obs - pred;
+        if self.model.reject && r * r > self.out2 * vr {
+            return;
+        }
+        let w = 1.0 / vr;
+        let (num, den) = ((w * tv * r) as f32, (w * tv * tv) as f32);
+        let wt = [
+            ((1.0 - fx) * (1.0 - fy)) as f32,
+            (fx * (1.0 - fy)) as f32,
+            ((1.0 - fx) * fy) as f32,
+            (fx * fy) as f32,
+        ];
+        for (&at, wt) in idx.iter().zip(wt) {
+            cnum[at as usize] += wt * num;
+            cden[at as usize] += wt * den;
+        }
+    }
+}
+
+/// An observation kept by the fused iteration for its C step.
+struct Kept {
+    /// Position of the pixel in the problem's sample.
+    px: u32,
+    /// The frame's index among the views.
+    view: u32,
+    k: u16,
+    idx: [u32; 4],
+    frac: [f64; 2],
+    cq: f64,
+    grad2: f64,
+}
+
+/// The samples of a frame kept in memory by the frame source.
+#[derive(Clone, Copy)]
+enum SamplesRef<'a> {
+    U8(&'a [u8]),
+    U16(&'a [u16]),
+}
+
+/// A frame as the fused iteration sees it: its number, what the passes need of it and its
+/// samples, borrowed.
+struct View<'a> {
+    i: usize,
+    geom: Geom,
+    samples: SamplesRef<'a>,
+}
+
+/// The frames with a plane pose as [`fused_iteration`] sees them, if the source keeps every
+/// frame's samples in memory.
+fn in_memory_views<'a>(p: &Problem<'a>) -> Result<Option<Vec<View<'a>>>, PhotometricError> {
+    let mut views = Vec::with_capacity(p.frames.len());
+    for i in 0..p.frames.len() {
+        let Some(image) = p.frames.samples_in_memory(i) else {
+            return Ok(None);
+        };
+        // (checks the frame)
+        let Some(pf) = p.prepare(i)? else {
+            continue;
+        };
+        if image.size() != (p.size.width, p.size.height) || image.bits() != pf.bits {
+            return Ok(None);
+        }
+        let samples = match image {
+            PlaneImage::U8(im) => SamplesRef::U8(im.data()),
+            PlaneImage::U16 { image, .. } => SamplesRef::U16(image.data()),
+        };
+        views.push(View {
+            i,
+            geom: pf.geom,
+            samples,
+        });
+    }
+    Ok(Some(views))
+}
+
+/// Side of the image tiles in which the passes visit the pixels: a tile's footprint on the
+/// plane is compact in every frame, so that the loads of `C` and the sums of the C step stay
+/// in the core's cache (rows of pixels walk across many cache lines of the plane grid).
+const TILE: usize = 16;
+
+/// Parallel jobs of the fused iteration (consecutive bands of tiles share their
+/// accumulators).
+const PIXEL_JOBS: usize = 16;
+
+/// The positions of `sample` (pixel indices of an image `width` wide) in the order of the
+/// image's tiles of [`TILE`] pixels (tiles row by row, pixels row by row in a tile).
+fn tile_order(sample: &[u32], width: usize) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..sample.len() as u32).collect();
+    order.sort_by_key(|&q| {
+        let pix = sample[q as usize] as usize;
+        let (x, y) = (pix % width, pix / width);
+        (y / TILE, x / TILE, q)
+    });
+    order
+}
+
+/// The jobs of [`fused_iteration`]: ranges of the problem's `order` made of whole bands of
+/// tiles (so that a job's pixels are a range of positions), [`PIXEL_JOBS`] of them.
+fn band_jobs(p: &Problem<'_>) -> Vec<std::ops::Range<usize>> {
+    let w = p.size.width;
+    let band = |k: usize| p.sample[p.order[k] as usize] as usize / w / TILE;
+    // where each band starts in the order
+    let mut starts: Vec<usize> = (0..p.order.len())
+        .filter(|&k| k == 0 || band(k) != band(k - 1))
+        .collect();
+    starts.push(p.order.len());
+    let bands = starts.len() - 1;
+    let per = bands.div_ceil(PIXEL_JOBS).max(1);
+    (0..bands)
+        .step_by(per)
+        .map(|b| starts[b]..starts[(b + per).min(bands)])
+        .collect()
+}
+
+/// One iteration's V step and C step in one visit of the data, when every frame is in
+/// memory: the pixels in blocks, each block over all frames; the block's V step is exact
+/// (all its observations are there), and its observations, kept, give their share of the
+/// C step with the block's new `V`. The same sums as a V pass followed by a C pass with the
+/// new `V` (the C step is done with the V step's `V` before the gauge is fixed, which gives
+/// the same `C` up to the gauge's scale: `C` comes back unscaled), at the cost of one pass.
+fn fused_iteration(
+    p: &Problem<'_>,
+    model: &Model,
+    tables: &Tables,
+    views: &[View<'_>],
+) -> Result<(VSums, Vec<f32>), PhotometricError> {
+    let npx = p.sample.len();
+    let ncell = cells(p.grid);
+    let levels = p.u.len();
+    let ctx = PassCtx {
+        p,
+        model,
+        tables,
+        reg2: p.options.registration_px * p.options.registration_px,
+        out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
+        top: p.top(),
+        step: Step::V,
+        tiles_x: p.grid.div_ceil(8),
+    };
+    let jobs = band_jobs(p);
+    let mut total = VSums::new(npx, levels);
+    let mut num_total = vec![0.0f64; ncell];
+    let mut den_total = vec![0.0f64; ncell];
+    fold_frame_jobs(
+        &jobs,
+        |job| -> Result<(std::ops::Range<usize>, JobSums), PhotometricError> {
+            let order = &p.order[job];
+            // the positions of the job's pixels (whole bands: a range)
+            let start = order.iter().min().map_or(0, |&q| q as usize);
+            let end = order.iter().max().map_or(0, |&q| q as usize + 1);
+            let mut acc = JobSums {
+                v: VSums::new(end - start, levels),
+                cnum: vec![0.0f32; ncell],
+                cden: vec![0.0f32; ncell],
+            };
+            let mut batch = Batch::new();
+            let mut kept = Vec::new();
+            for block in order.chunks(BATCH) {
+                kept.clear();
+                for (vi, view) in views.iter().enumerate() {
+                    let keep = Some((&mut kept, vi as u32));
+                    match view.samples {
+                        SamplesRef::U8(d) => ctx.stages(&view.geom, d, block, &mut batch),
+                        SamplesRef::U16(d) => ctx.stages(&view.geom, d, block, &mut batch),
+                    }
+                    ctx.v_sums(view.i, &view.geom, &batch, &mut acc.v, start, keep);
+                }
+                // the block's new V (unscaled), and its observations' share of the C step
+                let vs = &acc.v;
+                let new_v = |px: usize| {
+                    let a = px - start;
+                    if vs.den[a] > 0.0 {
+                        vs.num[a] / vs.den[a]
+                    } else {
+                        model.v[px]
+                    }
+                };
+                for o in &kept {
+                    let g = &views[o.view as usize].geom;
+                    let reg = ctx.reg2 / (g.cells_per_px * g.cells_per_px).max(1e-18);
+                    let vx = new_v(o.px as usize);
+                    let ob = (o.k, o.idx, o.frac, o.cq, o.grad2);
+                    ctx.c_one(g.exposure_ms, reg, vx, ob, &mut acc.cnum, &mut acc.cden);
+                }
+            }
+            Ok((start..end, acc))
+        },
+        |(range, acc)| {
+            total.add_range(&acc.v, range.start);
+            for (t, v) in num_total.iter_mut().zip(&acc.cnum) {
+                *t += *v as f64;
+            }
+            for (t, v) in den_total.iter_mut().zip(&acc.cden) {
+                *t += *v as f64;
+            }
+        },
+    )?;
+    let mut c = model.c.clone();
+    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
+        if *de > 0.0 {
+            *cj = (*cj as f64 + nu / de).max(0.0) as f32;
+        }
+    }
+    Ok((total, c))
+}
+
 /// One pass over the data with `V` and `C` as they are: the sums of the V step (the exact
-/// per-pixel least squares with `C` fixed) and of the C step (a Jacobi step towards the exact
-/// bilinear least-squares `C` with `V` fixed: the residuals splatted onto the cells, `c +=
-/// sum b w tV r / sum b w (tV)^2`), and the statistics of the residuals.
+/// per-pixel least squares with `C` fixed, and the statistics of the residuals) or the new
+/// `C` of the C step (a Jacobi step towards the exact bilinear least-squares `C` with `V`
+/// fixed: the residuals splatted onto the cells, `c += sum b w tV r / sum b w (tV)^2`).
 fn pass(
     p: &Problem<'_>,
     model: &Model,
     tables: &Tables,
-    want_c: bool,
+    step: Step,
 ) -> Result<(VSums, Vec<f32>), PhotometricError> {
-    let npx = p.sample.len();
     let ncell = cells(p.grid);
-    let reg2 = p.options.registration_px * p.options.registration_px;
-    let out2 = p.options.outlier_sigmas * p.options.outlier_sigmas;
     let u = p.u;
-    let top = p.top();
-    let cells_needed = if want_c { ncell } else { 0 };
+    let ctx = PassCtx {
+        p,
+        model,
+        tables,
+        reg2: p.options.registration_px * p.options.registration_px,
+        out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
+        top: p.top(),
+        step,
+        tiles_x: p.grid.div_ceil(8),
+    };
+    let (npx, cells_needed) = match step {
+        Step::V => (p.sample.len(), 0),
+        Step::C => (0, ncell),
+    };
     let mut total = VSums::new(npx, u.len());
     let mut num_total = vec![0.0f64; cells_needed];
     let mut den_total = vec![0.0f64; cells_needed];
+    let sample_bytes = if u.len() > 256 { 2 } else { 1 };
+    let jobs = frame_jobs(p.frames.len(), p.size.width * p.size.height * sample_bytes);
     fold_frame_jobs(
-        p.frames.len(),
-        |range| -> Result<(VSums, Vec<f32>, Vec<f32>), PhotometricError> {
-            let mut acc = VSums::new(npx, u.len());
-            let mut cnum = vec![0.0f32; cells_needed];
-            let mut cden = vec![0.0f32; cells_needed];
+        &jobs,
+        |range| -> Result<JobSums, PhotometricError> {
+            let mut prepared = Vec::with_capacity(range.len());
             for i in range {
-                let Some(pf) = p.prepare(i)? else {
-                    continue;
-                };
-                let t = pf.exposure_ms;
-                let odd = i % 2 == 1;
-                let inv_cpp2 = 1.0 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
-                let data = &pf.samples;
-                for (px, &pix) in p.sample.iter().enumerate() {
-                    let k = data[pix as usize];
-                    if k == top {
-                        continue;
-                    }
-                    let Some(g) = grid_coords(p.rays[pix as usize], &pf.m, p.grid) else {
-                        continue;
-                    };
-                    let (idx, wt, fx, fy) = taps(g, p.grid);
-                    let cs = [
-                        model.c[idx[0]] as f64,
-                        model.c[idx[1]] as f64,
-                        model.c[idx[2]] as f64,
-                        model.c[idx[3]] as f64,
-                    ];
-                    let cq = wt[0] * cs[0] + wt[1] * cs[1] + wt[2] * cs[2] + wt[3] * cs[3];
-                    let vx = model.v[px];
-                    let tv = t * vx;
-                    if tv.is_nan() || tv <= 0.0 || cq.is_nan() || cq < 0.0 {
-                        continue;
-                    }
-                    let tc = t * cq;
-                    let obs = u[k as usize];
-                    let pred = tc * vx;
-                    let gx = (cs[1] - cs[0]) * (1.0 - fy) + (cs[3] - cs[2]) * fy;
-                    let gy = (cs[2] - cs[0]) * (1.0 - fx) + (cs[3] - cs[1]) * fx;
-                    let bin = tables.bin(pred);
-                    // sensor noise plus the error a misregistration makes where C has edges
-                    let vr = tables.var[bin] + tv * tv * (gx * gx + gy * gy) * inv_cpp2 * reg2;
-                    let r = obs - pred;
-                    if model.reject && r * r > out2 * vr {
-                        acc.outliers += 1;
-                        continue;
-                    }
-                    let w = 1.0 / vr;
-                    if want_c {
-                        let (a, b) = ((w * tv * r) as f32, (w * tv * tv) as f32);
-                        for j in 0..4 {
-                            cnum[idx[j]] += wt[j] as f32 * a;
-                            cden[idx[j]] += wt[j] as f32 * b;
-                        }
-                    }
-                    if cq <= 0.0 {
-                        continue;
-                    }
-                    acc.num[px] += w * tc * obs;
-                    acc.den[px] += w * tc * tc;
-                    if odd {
-                        acc.num_odd[px] += w * tc * obs;
-                        acc.den_odd[px] += w * tc * tc;
-                    }
-                    acc.counts[px] += 1;
-                    acc.chi2 += r * r * w;
-                    acc.nobs += 1;
-                    acc.pred2 += pred * pred;
-                    acc.res2 += r * r;
-                    let kp = tables.grey[bin] as usize;
-                    acc.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
-                    acc.rcnt[kp] += 1.0;
+                if let Some(pf) = p.prepare(i)? {
+                    prepared.push((i, pf));
                 }
             }
-            Ok((acc, cnum, cden))
+            let mut acc = JobSums {
+                v: VSums::new(npx, u.len()),
+                cnum: vec![0.0f32; cells_needed],
+                cden: vec![0.0f32; cells_needed],
+            };
+            let mut batch = Batch::new();
+            for block in p.order.chunks(PIXEL_BLOCK) {
+                for (i, pf) in &prepared {
+                    match &pf.samples {
+                        Samples::U8(d) => ctx.observe(*i, &pf.geom, d, block, &mut acc, &mut batch),
+                        Samples::U16(d) => {
+                            ctx.observe(*i, &pf.geom, d, block, &mut acc, &mut batch)
+                        }
+                    }
+                }
+            }
+            Ok(acc)
         },
-        |(acc, cnum, cden)| {
-            total.add(&acc);
-            for (t, v) in num_total.iter_mut().zip(&cnum) {
+        |acc| {
+            total.add(&acc.v);
+            for (t, v) in num_total.iter_mut().zip(&acc.cnum) {
                 *t += *v as f64;
             }
-            for (t, v) in den_total.iter_mut().zip(&cden) {
+            for (t, v) in den_total.iter_mut().zip(&acc.cden) {
                 *t += *v as f64;
             }
         },
@@ -678,10 +1156,10 @@ fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
             for bx in 0..bw {
                 let (x, y) = ((bx * 8 + 4).min(w - 1), (by * 8 + 4).min(h - 1));
                 let px = y * w + x;
-                if pf.samples[px] == p.top() {
+                if pf.samples.get(px) == p.top() {
                     continue;
                 }
-                if let Some(g) = grid_coords(p.rays[px], &pf.m, p.grid) {
+                if let Some(g) = grid_coords(p.rays[px], &pf.geom.m, p.grid) {
                     let cnode = (bw * bh + (g[1] as usize / 8) * tiles + g[0] as usize / 8) as u32;
                     let pnode = (by * bw + bx) as u32;
                     seen[by * bw + bx] = true;
@@ -856,6 +1334,7 @@ pub fn calibrate_vignette(
         frames,
         rays: &rays,
         sample: Vec::new(),
+        order: Vec::new(),
         size,
         u,
         options,
@@ -924,6 +1403,7 @@ pub fn calibrate_vignette(
         let coarse = Problem {
             frames,
             rays: &rays,
+            order: tile_order(&sample, w),
             sample,
             size,
             u,
@@ -933,7 +1413,7 @@ pub fn calibrate_vignette(
         let stage = solve(
             &coarse,
             None,
-            COARSE_TOLERANCE,
+            (COARSE_TOLERANCE, 0.0),
             options.max_iterations,
             &|_, _| {},
         )?;
@@ -960,6 +1440,7 @@ pub fn calibrate_vignette(
         frames,
         rays: &rays,
         sample: (0..npx as u32).collect(),
+        order: tile_order(&(0..npx as u32).collect::<Vec<_>>(), w),
         size,
         u,
         options,
@@ -968,7 +1449,7 @@ pub fn calibrate_vignette(
     let stage = solve(
         &problem,
         warm,
-        options.tolerance,
+        (options.tolerance, options.noise_tolerance),
         options.max_iterations,
         &|i, d| progress(coarse_iterations + i, d),
     )?;
@@ -981,7 +1462,7 @@ pub fn calibrate_vignette(
     } = stage;
     let iterations = iterations + coarse_iterations;
     // the final statistics with the final V and C
-    let vs = pass(&problem, &model, &tables, false)?.0;
+    let vs = pass(&problem, &model, &tables, Step::V)?.0;
     finish(
         &problem,
         model,
@@ -1023,7 +1504,7 @@ struct Stage {
 fn solve(
     problem: &Problem<'_>,
     warm: Option<(Vec<f64>, NoiseModel)>,
-    tolerance: f64,
+    (tolerance, noise_tolerance): (f64, f64),
     max_iterations: usize,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<Stage, PhotometricError> {
@@ -1050,8 +1531,9 @@ fn solve(
     let mut tables = Tables::new(u, &model.noise);
     // (without outlier rejection: with C = 0 every observation would be one)
     model.reject = false;
-    model.c = pass(problem, &model, &tables, true)?.1;
+    model.c = pass(problem, &model, &tables, Step::C)?.1;
     model.reject = warm_start;
+    let views = in_memory_views(problem)?;
     let mut anderson = Anderson::new(ANDERSON_MEMORY);
     let mut change = Vec::new();
     let mut converged = false;
@@ -1063,8 +1545,14 @@ fn solve(
     const NOISE_FIT_ITERATIONS: usize = 7;
     for it in 0..max_iterations.max(1) {
         iterations = it + 1;
-        // V step with the current C
-        let vs = pass(problem, &model, &tables, false)?.0;
+        // V step with the current C (and, all frames at hand, the C step with its V)
+        let (vs, fused_c) = match &views {
+            Some(views) => {
+                let (vs, c) = fused_iteration(problem, &model, &tables, views)?;
+                (vs, Some(c))
+            }
+            None => (pass(problem, &model, &tables, Step::V)?.0, None),
+        };
         if vs.nobs == 0 {
             return Err(PhotometricError::Calibration(
                 "no pixel of any frame sees the calibration plane".into(),
@@ -1088,13 +1576,19 @@ fn solve(
         }
         // C step (a Jacobi step towards the exact least squares) with the new V
         let old_v = std::mem::replace(&mut model.v, gv);
-        let scaled = Model {
-            v: model.v.clone(),
-            c: model.c.iter().map(|&c| c * mean as f32).collect(),
-            noise: model.noise,
-            reject: model.reject,
+        let gc = match fused_c {
+            // the C step with the unscaled V: C on the gauge's scale
+            Some(c) => c.iter().map(|&c| c * mean as f32).collect(),
+            None => {
+                let scaled = Model {
+                    v: model.v.clone(),
+                    c: model.c.iter().map(|&c| c * mean as f32).collect(),
+                    noise: model.noise,
+                    reject: model.reject,
+                };
+                pass(problem, &scaled, &tables, Step::C)?.1
+            }
         };
-        let gc = pass(problem, &scaled, &tables, true)?.1;
         // Anderson mixing of the whole iteration (V and C together)
         let mut x: Vec<f64> = old_v.clone();
         x.extend(model.c.iter().map(|&c| c as f64));
@@ -1136,7 +1630,8 @@ fn solve(
         if !warm_start && (it + 1 == SETTLE || it + 1 == NOISE_FIT_ITERATIONS) {
             anderson.reset();
         }
-        if (warm_start || it + 1 > NOISE_FIT_ITERATIONS) && delta < tolerance {
+        let enough = tolerance.max(noise_tolerance * median_std_error(&model.v, &vs.den));
+        if (warm_start || it + 1 > NOISE_FIT_ITERATIONS) && delta < enough {
             converged = true;
             break;
         }
@@ -1148,6 +1643,22 @@ fn solve(
         converged,
         change,
     })
+}
+
+/// The median relative standard error of the raw map `v` from the normal equations (`1 /
+/// sqrt(den)` per pixel), over the pixels with observations.
+fn median_std_error(v: &[f64], den: &[f64]) -> f64 {
+    let mut rel: Vec<f64> = v
+        .iter()
+        .zip(den)
+        .filter(|(v, d)| **d > 0.0 && **v > 0.0)
+        .map(|(v, d)| 1.0 / (d.sqrt() * v))
+        .collect();
+    if rel.is_empty() {
+        return 0.0;
+    }
+    let mid = rel.len() / 2;
+    *rel.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Normalisation, the odd/even maps, the uncertainty, the smoothing and the checks of the

@@ -26,6 +26,9 @@ impl PlaneFrames for Frames {
             pose: PlanePose { r: p.r, t: p.t },
         })
     }
+    fn samples_in_memory(&self, i: usize) -> Option<&PlaneImage> {
+        self.images.get(i)
+    }
 }
 
 fn set(seed: u64, w: usize, h: usize, n: usize, sensor: Sensor) -> Frames {

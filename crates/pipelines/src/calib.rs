@@ -380,6 +380,9 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
             pose,
         })
     }
+    fn samples_in_memory(&self, i: usize) -> Option<&photometric::PlaneImage> {
+        self.decoded.get(i)
+    }
 }
 
 /// The maps, their cross-sections through the image centre with 2-sigma bands (and the

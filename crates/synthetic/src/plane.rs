@@ -3,8 +3,8 @@
 //! through the FOV camera with the ground-truth vignette, response, random exposures and
 //! noise. The true poses are available in `monovo calib vignette --poses` format.
 
-use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
-use crate::scene::texture;
+use crate::camera::{ground_truth_vignette, FovCamera, RayCache, ResponseCurve};
+use crate::scene::TextureTable;
 use crate::sensor::Sensor;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -89,7 +89,8 @@ impl Default for PlaneConfig {
 pub struct PlaneSequence {
     /// Settings.
     pub config: PlaneConfig,
-    /// The camera.
+    /// The camera (the renderer keeps its rays from the first frame on: change it before
+    /// rendering, if at all).
     pub camera: FovCamera,
     /// Per-frame `camera_from_plane`.
     pub poses: Vec<PlanePose>,
@@ -100,7 +101,12 @@ pub struct PlaneSequence {
     /// Ground-truth vignette (max 1).
     pub vignette: Vec<f32>,
     seed: u64,
+    rays: RayCache,
+    texture: TextureTable,
 }
+
+/// The 2x2 supersampling of the plane renderer (offsets from the pixel centre).
+const SUBPIXELS: [(f64, f64); 4] = [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)];
 
 /// Energy scale of the plane sequences (`U`-units per ms and radiance).
 const GAIN: f64 = 34.0;
@@ -155,6 +161,8 @@ impl PlaneSequence {
             vignette: ground_truth_vignette(config.width, config.height, seed ^ 0x5eed),
             config,
             seed,
+            rays: RayCache::default(),
+            texture: TextureTable::new(seed ^ 0xBEEF, 64),
         }
     }
 
@@ -171,7 +179,7 @@ impl PlaneSequence {
                 0.04
             }
         } else {
-            0.78 + 0.12 * (texture(self.seed ^ 0xBEEF, x * 0.6, y * 0.6) - 0.5).clamp(-1.0, 1.0)
+            0.78 + 0.12 * (self.texture.texture(x * 0.6, y * 0.6) - 0.5).clamp(-1.0, 1.0)
         }
     }
 
@@ -217,6 +225,9 @@ impl PlaneSequence {
     /// supersampled).
     fn energy(&self, i: usize) -> impl Fn(usize, usize) -> f64 + Sync + '_ {
         let w = self.config.width;
+        let rays = self
+            .rays
+            .get(&self.camera, (w, self.config.height), &SUBPIXELS);
         let pose = self.poses[i];
         let t = self.exposures_ms[i];
         let (r, tr) = (pose.rotation(), pose.translation());
@@ -225,11 +236,11 @@ impl PlaneSequence {
         let nt = n.dot(&tr);
         move |x, y| {
             let mut rad = 0.0;
-            for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+            for ray in &rays[(y * w + x) * SUBPIXELS.len()..][..SUBPIXELS.len()] {
                 rad += 0.25
-                    * match self.camera.unproject(x as f64 + dx, y as f64 + dy) {
-                        Some(ray) => {
-                            let ray = Vector3::from(ray);
+                    * match ray[0].is_nan() {
+                        false => {
+                            let ray = Vector3::from(*ray);
                             let nr = n.dot(&ray);
                             let lam = nt / nr;
                             if nr.abs() < 1e-12 || lam <= 0.0 {
@@ -240,7 +251,7 @@ impl PlaneSequence {
                                 self.radiance(plane[0], plane[1])
                             }
                         }
-                        None => 0.05,
+                        true => 0.05,
                     };
             }
             GAIN * t * self.vignette[y * w + x] as f64 * rad

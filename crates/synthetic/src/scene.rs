@@ -3,7 +3,7 @@
 
 use rayon::prelude::*;
 
-use crate::camera::{ground_truth_vignette, FovCamera, ResponseCurve};
+use crate::camera::{ground_truth_vignette, FovCamera, RayCache, ResponseCurve};
 use crate::sensor::Sensor;
 use nalgebra::Vector3;
 
@@ -22,32 +22,114 @@ fn hash(seed: u64, x: i64, y: i64) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
-fn value_noise(seed: u64, x: f64, y: f64) -> f64 {
-    let (xi, yi) = (x.floor(), y.floor());
+fn value_noise_with(lattice: impl Fn(i64, i64) -> f64, x: f64, y: f64) -> f64 {
+    let (xi, yi) = (floor(x), floor(y));
     let (fx, fy) = (x - xi, y - yi);
     let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
     let (xi, yi) = (xi as i64, yi as i64);
-    let a = hash(seed, xi, yi);
-    let b = hash(seed, xi + 1, yi);
-    let c = hash(seed, xi, yi + 1);
-    let d = hash(seed, xi + 1, yi + 1);
+    let a = lattice(xi, yi);
+    let b = lattice(xi + 1, yi);
+    let c = lattice(xi, yi + 1);
+    let d = lattice(xi + 1, yi + 1);
     a + (b - a) * sx + (c - a) * sy + (a - b - c + d) * sx * sy
 }
 
+/// `x.floor()` without a call into the C library (the baseline x86-64 has no rounding
+/// instruction): the same value.
+#[inline]
+fn floor(x: f64) -> f64 {
+    if x.abs() < 4.5e15 {
+        let t = x as i64 as f64;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x.floor()
+    }
+}
+
+/// Octaves of [`texture`] and their lattice seeds (offsets from the texture's seed; the last
+/// is the patch layer's).
+const OCTAVE_SEEDS: [u64; 5] = [0, 1, 2, 3, 99];
+
 /// Procedural texture with a wide dynamic range: relative radiance in about `[0.05, 1.5]`.
 pub fn texture(seed: u64, x: f64, y: f64) -> f64 {
+    texture_with(
+        |o, xi, yi| hash(seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi),
+        x,
+        y,
+    )
+}
+
+/// [`texture`] with the lattice values of octave `o` given by `lattice(o, xi, yi)`.
+#[inline]
+fn texture_with(lattice: impl Fn(usize, i64, i64) -> f64, x: f64, y: f64) -> f64 {
     let mut v = 0.0;
     let mut amp = 0.5;
     let mut f = 0.7;
     for o in 0..4 {
-        v += amp * value_noise(seed.wrapping_add(o), x * f, y * f);
+        v += amp * value_noise_with(|xi, yi| lattice(o, xi, yi), x * f, y * f);
         amp *= 0.5;
         f *= 2.3;
     }
     // v in ~[0, 0.94]; sharpen into patches of very different brightness
-    let patch = value_noise(seed.wrapping_add(99), x * 0.25, y * 0.25);
+    let patch = value_noise_with(|xi, yi| lattice(4, xi, yi), x * 0.25, y * 0.25);
     let base = (4.0 * (v - 0.47)).exp() * (0.35 + 1.3 * patch * patch);
     base.clamp(0.03, 3.0) * 0.5
+}
+
+/// [`texture`] of one seed with its lattice values kept for the lattice points within
+/// `half` of the origin: the same values, looked up instead of hashed (a renderer evaluates
+/// the texture millions of times per frame over a bounded area).
+#[derive(Clone)]
+pub(crate) struct TextureTable {
+    seed: u64,
+    half: i64,
+    /// Per octave, row-major over `-half ..= half` squared.
+    values: Vec<Vec<f64>>,
+}
+
+impl std::fmt::Debug for TextureTable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TextureTable(seed {}, half {})", self.seed, self.half)
+    }
+}
+
+impl TextureTable {
+    pub(crate) fn new(seed: u64, half: i64) -> TextureTable {
+        let side = (2 * half + 1) as usize;
+        let values = OCTAVE_SEEDS
+            .iter()
+            .map(|&o| {
+                let s = seed.wrapping_add(o);
+                (0..side * side)
+                    .map(|i| {
+                        let (xi, yi) = ((i % side) as i64 - half, (i / side) as i64 - half);
+                        hash(s, xi, yi)
+                    })
+                    .collect()
+            })
+            .collect();
+        TextureTable { seed, half, values }
+    }
+
+    /// [`texture`]`(seed, x, y)`.
+    pub(crate) fn texture(&self, x: f64, y: f64) -> f64 {
+        let (half, side) = (self.half, 2 * self.half + 1);
+        texture_with(
+            |o, xi, yi| {
+                if xi.abs() <= half && yi.abs() <= half {
+                    self.values[o][((yi + half) * side + xi + half) as usize]
+                } else {
+                    hash(self.seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi)
+                }
+            },
+            x,
+            y,
+        )
+    }
 }
 
 /// An axis-aligned room around a path, textured on every face.
@@ -250,7 +332,8 @@ pub fn shift_exposure_log(
 pub struct SyntheticSequence {
     /// Settings.
     pub config: SequenceConfig,
-    /// The camera.
+    /// The camera (the renderer keeps its rays from the first frame on: change it before
+    /// rendering, if at all).
     pub camera: FovCamera,
     /// Ground-truth path (length about 100).
     pub path: Path,
@@ -263,6 +346,7 @@ pub struct SyntheticSequence {
     /// Ground-truth vignette (row-major, max 1).
     pub vignette: Vec<f32>,
     seed: u64,
+    rays: RayCache,
 }
 
 /// Energy scale: `U`-units per (ms x radiance).
@@ -302,6 +386,7 @@ impl SyntheticSequence {
             vignette: ground_truth_vignette(config.width, config.height, seed),
             config,
             seed,
+            rays: RayCache::default(),
         };
         if config.exposure == ExposureMode::Auto {
             seq.exposures_ms = seq.auto_exposures(&mut rng);
@@ -356,6 +441,7 @@ impl SyntheticSequence {
         let r = self.path.rotations[i];
         let origin = self.path.positions[i];
         let t = self.exposures_ms[i];
+        let rays = self.rays.get(&self.camera, (w, h), &[(0.0, 0.0)]);
         self.config.sensor.capture(
             &self.response,
             w,
@@ -363,9 +449,11 @@ impl SyntheticSequence {
             t,
             self.seed ^ (i as u64) << 20,
             |x, y| {
-                let rad = match self.camera.unproject(x as f64, y as f64) {
-                    Some(ray) => self.room.radiance(&origin, &(r * Vector3::from(ray))),
-                    None => 0.0,
+                let ray = rays[y * w + x];
+                let rad = if ray[0].is_nan() {
+                    0.0
+                } else {
+                    self.room.radiance(&origin, &(r * Vector3::from(ray)))
                 };
                 GAIN * t * self.vignette[y * w + x] as f64 * rad
             },
@@ -518,5 +606,46 @@ impl Sweep {
     /// Frame `i` as stored by the camera (after the sensor's JPEG compression, if any).
     pub fn frame(&self, i: usize) -> Result<Vec<u8>, image::ImageError> {
         self.sensor.store(self.width, self.height, self.render(i))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table gives the very values of the hashing texture, inside its square and out.
+    #[test]
+    fn texture_table_matches_the_texture() {
+        let table = TextureTable::new(0xBEEF, 16);
+        let mut rng = Rng::derive(3, 1);
+        for _ in 0..20_000 {
+            // up to well outside the table (the finest octave reaches 8.5 times x)
+            let (x, y) = (rng.range(-4.0, 4.0), rng.range(-4.0, 4.0));
+            let (a, b) = (table.texture(x, y), texture(0xBEEF, x, y));
+            assert_eq!(a.to_bits(), b.to_bits(), "at ({x}, {y})");
+        }
+        for x in [
+            0.0,
+            -0.0,
+            -1.0,
+            1e-300,
+            -1e-300,
+            2.5,
+            -2.5,
+            1e17,
+            -1e17,
+            f64::NAN,
+        ] {
+            let f = floor(x);
+            assert!(
+                f == x.floor() || (f.is_nan() && x.floor().is_nan()),
+                "floor({x})"
+            );
+            let (a, b) = (table.texture(x, 0.3), texture(0xBEEF, x, 0.3));
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "at {x}"
+            );
+        }
     }
 }

@@ -36,7 +36,7 @@ use std::str::FromStr;
 
 use rayon::prelude::*;
 
-use crate::camera::response_value;
+use crate::camera::{response_value, ResponseLookup};
 use crate::Rng;
 
 /// A preset noise level of [`Sensor`].
@@ -219,14 +219,20 @@ impl Sensor {
     /// One noisy observation of a working pixel: the grey value (before compression) for the
     /// expected linear signal `energy` (U-units), with the inverse response `u`.
     pub fn observe(&self, u: &[f64; 256], energy: f64, rng: &mut Rng) -> u8 {
-        self.observe_with_dark(u, energy, 0.0, rng) as u8
+        self.observe_with_dark(&ResponseLookup::plain(u), energy, 0.0, rng) as u8
     }
 
     /// The grey value `0 ..= u.len() - 1` of one observation; `u` has `2^k` values with
     /// `U(top) = 255`. The ADC noise is the same fraction of the full scale at every bit
     /// depth: a deeper sensor differs from an 8-bit one by its finer quantisation only.
-    fn observe_with_dark(&self, u: &[f64], energy: f64, dark_e: f64, rng: &mut Rng) -> u32 {
-        let top = (u.len() - 1) as f64;
+    fn observe_with_dark(
+        &self,
+        u: &ResponseLookup<'_>,
+        energy: f64,
+        dark_e: f64,
+        rng: &mut Rng,
+    ) -> u32 {
+        let top = u.top() as f64;
         let linear = if self.full_well.is_finite() {
             let mean_e = energy.max(0.0) * self.full_well / 255.0 + dark_e;
             let electrons = poisson(mean_e, rng) + self.read_noise * rng.normal();
@@ -234,7 +240,7 @@ impl Sensor {
         } else {
             energy.clamp(0.0, 255.0)
         };
-        let grey = response_value(u, linear) + self.adc_noise * (top / 255.0) * rng.normal();
+        let grey = u.value(linear) + self.adc_noise * (top / 255.0) * rng.normal();
         grey.round().clamp(0.0, top) as u32
     }
 
@@ -304,6 +310,7 @@ impl Sensor {
         to_sample: impl Fn(u32) -> T + Sync,
     ) -> Vec<T> {
         let top = (u.len() - 1) as u32;
+        let u = &ResponseLookup::new(u);
         let mut out = vec![T::default(); width * height];
         out.par_chunks_mut(width.max(1))
             .enumerate()
