@@ -12,6 +12,8 @@
 //! of a local-linear smoother in two dimensions shrinks as the sixth root of the amount of
 //! data).
 
+use rayon::prelude::*;
+
 use crate::PhotometricError;
 
 /// Which smoothing was applied and why.
@@ -284,9 +286,10 @@ pub(crate) fn choose_smoothing(
         Some(s) => (radius_for_sigma(s.max(0.0)), false),
         None => {
             // each candidate's score (mean squared prediction error) and its standard error
-            let mut scored: Vec<(usize, f64, f64)> = Vec::new();
+            // (the candidates in parallel: each one's sums in the same order with any number
+            // of threads)
             let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
-            for &r in &candidates {
+            let score_of = |r: usize| -> (usize, f64, f64) {
                 let (so, _) = local_linear(odd, &wt, w, h, r, false);
                 let (se, _) = local_linear(even, &wt, w, h, r, false);
                 let (mut s, mut s2, mut cnt) = (0.0, 0.0, 0.0);
@@ -309,8 +312,12 @@ pub(crate) fn choose_smoothing(
                 } else {
                     (f64::INFINITY, 0.0)
                 };
+                (r, score, sem)
+            };
+            let scored: Vec<(usize, f64, f64)> =
+                candidates.par_iter().map(|&r| score_of(r)).collect();
+            for &(r, score, _) in &scored {
                 scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
-                scored.push((r, score, sem));
             }
             let Some(&(_, min_score, min_sem)) = scored
                 .iter()

@@ -769,22 +769,10 @@ impl PassCtx<'_, '_> {
         for j in 0..b.n {
             let px = b.pos[j] as usize;
             let (cq, vx) = (b.cq[j], model.v[px]);
-            if let Some((kept, view)) = keep.as_mut() {
-                if cq >= 0.0 {
-                    kept.push(Kept {
-                        px: b.pos[j],
-                        view: *view,
-                        k: b.k[j],
-                        idx: b.idx[j],
-                        frac: b.frac[j],
-                        cq,
-                        grad2: b.grad2[j],
-                    });
-                }
-            }
             let px = px - offset;
             let tv = t * vx;
-            if !(tv > 0.0 && cq > 0.0) {
+            // (observations where C is 0 count for the C step: it moves C from there)
+            if !(tv > 0.0 && cq >= 0.0) {
                 continue;
             }
             let tc = t * cq;
@@ -795,10 +783,26 @@ impl PassCtx<'_, '_> {
             let vr = tables.var[bin] + tv * tv * b.grad2[j] * reg;
             let r = obs - pred;
             if model.reject && r * r > self.out2 * vr {
-                vs.outliers += 1;
+                if cq > 0.0 {
+                    vs.outliers += 1;
+                }
                 continue;
             }
             let w = 1.0 / vr;
+            if let Some((kept, view)) = keep.as_mut() {
+                kept.push(Kept {
+                    px: b.pos[j],
+                    view: *view,
+                    idx: b.idx[j],
+                    frac: [b.frac[j][0] as f32, b.frac[j][1] as f32],
+                    obs: obs as f32,
+                    cq: cq as f32,
+                    w: w as f32,
+                });
+            }
+            if cq == 0.0 {
+                continue;
+            }
             let wtc = w * tc;
             vs.num[px] += wtc * obs;
             vs.den[px] += wtc * tc;
@@ -868,16 +872,22 @@ impl PassCtx<'_, '_> {
 }
 
 /// An observation kept by the fused iteration for its C step.
+///
+/// Its weight and whether it is an outlier are those of the V step, with the `V` before the
+/// step: the C step's own (with the new `V`) differ by the step's change, and both are the
+/// same at the solution.
 struct Kept {
     /// Position of the pixel in the problem's sample.
     px: u32,
     /// The frame's index among the views.
     view: u32,
-    k: u16,
+    /// The storage indices of the four bilinear taps and the fractions between them.
     idx: [u32; 4],
-    frac: [f64; 2],
-    cq: f64,
-    grad2: f64,
+    frac: [f32; 2],
+    /// `U` of the sample, `C` at the position and the observation's weight.
+    obs: f32,
+    cq: f32,
+    w: f32,
 }
 
 /// The samples of a frame kept in memory by the frame source.
@@ -894,6 +904,10 @@ struct View<'a> {
     geom: Geom,
     samples: SamplesRef<'a>,
 }
+
+/// What a job of [`fused_iteration`] hands back: its pixels' positions, their V step's sums
+/// and the C step's numerator and denominator per cell.
+type FusedJob = (std::ops::Range<usize>, VSums, Vec<[f32; 2]>);
 
 /// The frames with a plane pose as [`fused_iteration`] sees them, if the source keeps every
 /// frame's samples in memory.
@@ -965,9 +979,11 @@ fn band_jobs(p: &Problem<'_>) -> Vec<std::ops::Range<usize>> {
 /// One iteration's V step and C step in one visit of the data, when every frame is in
 /// memory: the pixels in blocks, each block over all frames; the block's V step is exact
 /// (all its observations are there), and its observations, kept, give their share of the
-/// C step with the block's new `V`. The same sums as a V pass followed by a C pass with the
-/// new `V` (the C step is done with the V step's `V` before the gauge is fixed, which gives
-/// the same `C` up to the gauge's scale: `C` comes back unscaled), at the cost of one pass.
+/// C step with the block's new `V`. The sums of a V pass followed by a C pass with the new
+/// `V`, at the cost of one pass, but for two things: the C step weighs the observations and
+/// drops outliers as the V step did (the same at the solution; see [`Kept`]), and it is done
+/// with the V step's `V` before the gauge is fixed (the same `C` up to the gauge's scale:
+/// `C` comes back unscaled).
 fn fused_iteration(
     p: &Problem<'_>,
     model: &Model,
@@ -993,16 +1009,15 @@ fn fused_iteration(
     let mut den_total = vec![0.0f64; ncell];
     fold_frame_jobs(
         &jobs,
-        |job| -> Result<(std::ops::Range<usize>, JobSums), PhotometricError> {
+        |job| -> Result<FusedJob, PhotometricError> {
             let order = &p.order[job];
             // the positions of the job's pixels (whole bands: a range)
             let start = order.iter().min().map_or(0, |&q| q as usize);
             let end = order.iter().max().map_or(0, |&q| q as usize + 1);
-            let mut acc = JobSums {
-                v: VSums::new(end - start, levels),
-                cnum: vec![0.0f32; ncell],
-                cden: vec![0.0f32; ncell],
-            };
+            let mut acc = VSums::new(end - start, levels);
+            // the C step's numerator and denominator per cell, side by side (one cache line)
+            let mut cacc = vec![[0.0f32; 2]; ncell];
+            let mut new_v = vec![0.0f64; end - start];
             let mut batch = Batch::new();
             let mut kept = Vec::new();
             for block in order.chunks(BATCH) {
@@ -1013,35 +1028,47 @@ fn fused_iteration(
                         SamplesRef::U8(d) => ctx.stages(&view.geom, d, block, &mut batch),
                         SamplesRef::U16(d) => ctx.stages(&view.geom, d, block, &mut batch),
                     }
-                    ctx.v_sums(view.i, &view.geom, &batch, &mut acc.v, start, keep);
+                    ctx.v_sums(view.i, &view.geom, &batch, &mut acc, start, keep);
                 }
                 // the block's new V (unscaled), and its observations' share of the C step
-                let vs = &acc.v;
-                let new_v = |px: usize| {
-                    let a = px - start;
-                    if vs.den[a] > 0.0 {
-                        vs.num[a] / vs.den[a]
+                for &q in block {
+                    let (px, a) = (q as usize, q as usize - start);
+                    new_v[a] = if acc.den[a] > 0.0 {
+                        acc.num[a] / acc.den[a]
                     } else {
                         model.v[px]
-                    }
-                };
+                    };
+                }
                 for o in &kept {
-                    let g = &views[o.view as usize].geom;
-                    let reg = ctx.reg2 / (g.cells_per_px * g.cells_per_px).max(1e-18);
-                    let vx = new_v(o.px as usize);
-                    let ob = (o.k, o.idx, o.frac, o.cq, o.grad2);
-                    ctx.c_one(g.exposure_ms, reg, vx, ob, &mut acc.cnum, &mut acc.cden);
+                    let tv = views[o.view as usize].geom.exposure_ms * new_v[o.px as usize - start];
+                    // (a NaN V fails too)
+                    if tv.is_nan() || tv <= 0.0 {
+                        continue;
+                    }
+                    let (w, cq) = (o.w as f64, o.cq as f64);
+                    let r = o.obs as f64 - tv * cq;
+                    let (num, den) = ((w * tv * r) as f32, (w * tv * tv) as f32);
+                    let [fx, fy] = o.frac;
+                    let wt = [
+                        (1.0 - fx) * (1.0 - fy),
+                        fx * (1.0 - fy),
+                        (1.0 - fx) * fy,
+                        fx * fy,
+                    ];
+                    for (&at, wt) in o.idx.iter().zip(wt) {
+                        let c = &mut cacc[at as usize];
+                        c[0] += wt * num;
+                        c[1] += wt * den;
+                    }
                 }
             }
-            Ok((start..end, acc))
+            Ok((start..end, acc, cacc))
         },
-        |(range, acc)| {
-            total.add_range(&acc.v, range.start);
-            for (t, v) in num_total.iter_mut().zip(&acc.cnum) {
-                *t += *v as f64;
-            }
-            for (t, v) in den_total.iter_mut().zip(&acc.cden) {
-                *t += *v as f64;
+        |(range, acc, cacc)| {
+            total.add_range(&acc, range.start);
+            for ((n, d), c) in num_total.iter_mut().zip(den_total.iter_mut()).zip(&cacc) {
+                *n += c[0] as f64;
+                *d += c[1] as f64;
             }
         },
     )?;
