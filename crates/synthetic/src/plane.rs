@@ -162,7 +162,7 @@ impl PlaneSequence {
             config,
             seed,
             rays: RayCache::default(),
-            texture: TextureTable::new(seed ^ 0xBEEF, 64),
+            texture: TextureTable::new(seed ^ 0xBEEF, [-8.0, 8.0], [-8.0, 8.0]),
         }
     }
 

@@ -80,48 +80,71 @@ fn texture_with(lattice: impl Fn(usize, i64, i64) -> f64, x: f64, y: f64) -> f64
     base.clamp(0.03, 3.0) * 0.5
 }
 
-/// [`texture`] of one seed with its lattice values kept for the lattice points within
-/// `half` of the origin: the same values, looked up instead of hashed (a renderer evaluates
-/// the texture millions of times per frame over a bounded area).
+/// The lattice frequencies of [`texture`]'s octaves, computed as it computes them.
+fn octave_frequencies() -> [f64; 5] {
+    let mut fs = [0.25; 5];
+    let mut f = 0.7;
+    for fo in fs.iter_mut().take(4) {
+        *fo = f;
+        f *= 2.3;
+    }
+    fs
+}
+
+/// Largest lattice table of one octave (entries); beyond it the octave is hashed.
+const MAX_TABLE: usize = 1 << 22;
+
+/// [`texture`] of one seed with its lattice values kept for the lattice points that the
+/// texture coordinates `x_range x y_range` reach: the same values, looked up instead of
+/// hashed (a renderer evaluates the texture millions of times per frame over a bounded
+/// area); points outside are hashed.
 #[derive(Clone)]
 pub(crate) struct TextureTable {
     seed: u64,
-    half: i64,
-    /// Per octave, row-major over `-half ..= half` squared.
-    values: Vec<Vec<f64>>,
+    /// Per octave: the lattice origin, the table's width and height, and its values.
+    octaves: Vec<(i64, i64, u64, u64, Vec<f64>)>,
 }
 
 impl std::fmt::Debug for TextureTable {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "TextureTable(seed {}, half {})", self.seed, self.half)
+        let n: usize = self.octaves.iter().map(|o| o.4.len()).sum();
+        write!(f, "TextureTable(seed {}, {n} lattice values)", self.seed)
     }
 }
 
 impl TextureTable {
-    pub(crate) fn new(seed: u64, half: i64) -> TextureTable {
-        let side = (2 * half + 1) as usize;
-        let values = OCTAVE_SEEDS
+    pub(crate) fn new(seed: u64, x_range: [f64; 2], y_range: [f64; 2]) -> TextureTable {
+        let octaves = OCTAVE_SEEDS
             .iter()
-            .map(|&o| {
+            .zip(octave_frequencies())
+            .map(|(&o, f)| {
                 let s = seed.wrapping_add(o);
-                (0..side * side)
-                    .map(|i| {
-                        let (xi, yi) = ((i % side) as i64 - half, (i / side) as i64 - half);
-                        hash(s, xi, yi)
-                    })
-                    .collect()
+                // one lattice point of margin either side (and the +1 neighbour)
+                let lo = |v: f64| (v * f).floor() as i64 - 1;
+                let hi = |v: f64| (v * f).floor() as i64 + 2;
+                let (x0, y0) = (lo(x_range[0]), lo(y_range[0]));
+                let nx = (hi(x_range[1]) - x0 + 1).max(0) as usize;
+                let ny = (hi(y_range[1]) - y0 + 1).max(0) as usize;
+                if nx.saturating_mul(ny) > MAX_TABLE || !(x_range[0] <= x_range[1]) {
+                    return (0, 0, 0, 0, Vec::new());
+                }
+                let values = (0..nx * ny)
+                    .map(|i| hash(s, x0 + (i % nx) as i64, y0 + (i / nx) as i64))
+                    .collect();
+                (x0, y0, nx as u64, ny as u64, values)
             })
             .collect();
-        TextureTable { seed, half, values }
+        TextureTable { seed, octaves }
     }
 
     /// [`texture`]`(seed, x, y)`.
     pub(crate) fn texture(&self, x: f64, y: f64) -> f64 {
-        let (half, side) = (self.half, 2 * self.half + 1);
         texture_with(
             |o, xi, yi| {
-                if xi.abs() <= half && yi.abs() <= half {
-                    self.values[o][((yi + half) * side + xi + half) as usize]
+                let (x0, y0, nx, ny, values) = &self.octaves[o];
+                let (dx, dy) = (xi.wrapping_sub(*x0) as u64, yi.wrapping_sub(*y0) as u64);
+                if dx < *nx && dy < *ny {
+                    values[(dy * nx + dx) as usize]
                 } else {
                     hash(self.seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi)
                 }
@@ -161,6 +184,48 @@ impl Room {
 
     /// Radiance seen from `origin` along `dir` (inside the room).
     pub fn radiance(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> f64 {
+        match self.hit(origin, dir) {
+            Some((face, a, b)) => texture(self.face_seed(face), a * 1.3, b * 1.3),
+            None => 0.1,
+        }
+    }
+
+    /// [`Room::radiance`] with the faces' textures of [`Room::textures`].
+    pub(crate) fn radiance_with(
+        &self,
+        textures: &[TextureTable],
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+    ) -> f64 {
+        match self.hit(origin, dir) {
+            Some((face, a, b)) => textures[face].texture(a * 1.3, b * 1.3),
+            None => 0.1,
+        }
+    }
+
+    /// The textures of the six faces (see [`TextureTable`]).
+    pub(crate) fn textures(&self) -> Vec<TextureTable> {
+        (0..6)
+            .map(|face| {
+                let axis = face / 2;
+                let (ka, kb) = match axis {
+                    0 => (1, 2),
+                    1 => (0, 2),
+                    _ => (0, 1),
+                };
+                let range = |k: usize| [self.min[k] * 1.3, self.max[k] * 1.3];
+                TextureTable::new(self.face_seed(face), range(ka), range(kb))
+            })
+            .collect()
+    }
+
+    fn face_seed(&self, face: usize) -> u64 {
+        self.seed.wrapping_add(face as u64 * 1000)
+    }
+
+    /// Where the ray from `origin` along `dir` leaves the room: the face (`2 axis + (dir
+    /// positive)`) and the hit's coordinates on it.
+    fn hit(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<(usize, f64, f64)> {
         let mut best = f64::INFINITY;
         let mut axis = 0;
         for k in 0..3 {
@@ -179,7 +244,7 @@ impl Room {
             }
         }
         if !best.is_finite() {
-            return 0.1;
+            return None;
         }
         let hit = origin + dir * best;
         let (a, b) = match axis {
@@ -187,8 +252,7 @@ impl Room {
             1 => (hit[0], hit[2]),
             _ => (hit[0], hit[1]),
         };
-        let face = (axis * 2 + usize::from(dir[axis] > 0.0)) as u64;
-        texture(self.seed.wrapping_add(face * 1000), a * 1.3, b * 1.3)
+        Some((axis * 2 + usize::from(dir[axis] > 0.0), a, b))
     }
 }
 
@@ -347,6 +411,7 @@ pub struct SyntheticSequence {
     pub vignette: Vec<f32>,
     seed: u64,
     rays: RayCache,
+    textures: std::sync::OnceLock<Vec<TextureTable>>,
 }
 
 /// Energy scale: `U`-units per (ms x radiance).
@@ -387,6 +452,7 @@ impl SyntheticSequence {
             config,
             seed,
             rays: RayCache::default(),
+            textures: Default::default(),
         };
         if config.exposure == ExposureMode::Auto {
             seq.exposures_ms = seq.auto_exposures(&mut rng);
@@ -442,6 +508,7 @@ impl SyntheticSequence {
         let origin = self.path.positions[i];
         let t = self.exposures_ms[i];
         let rays = self.rays.get(&self.camera, (w, h), &[(0.0, 0.0)]);
+        let textures = self.textures.get_or_init(|| self.room.textures());
         self.config.sensor.capture(
             &self.response,
             w,
@@ -453,7 +520,8 @@ impl SyntheticSequence {
                 let rad = if ray[0].is_nan() {
                     0.0
                 } else {
-                    self.room.radiance(&origin, &(r * Vector3::from(ray)))
+                    let dir = r * Vector3::from(ray);
+                    self.room.radiance_with(textures, &origin, &dir)
                 };
                 GAIN * t * self.vignette[y * w + x] as f64 * rad
             },
@@ -613,10 +681,35 @@ impl Sweep {
 mod tests {
     use super::*;
 
-    /// The table gives the very values of the hashing texture, inside its square and out.
+    /// The room's face tables give the very radiance of the hashing texture.
+    #[test]
+    fn room_textures_match_the_room() {
+        let room = Room {
+            min: Vector3::new(-7.0, -5.0, -2.0),
+            max: Vector3::new(9.0, 4.0, 3.0),
+            seed: 17,
+        };
+        let textures = room.textures();
+        let mut rng = Rng::derive(4, 1);
+        for _ in 0..20_000 {
+            let origin = Vector3::new(
+                rng.range(-6.0, 8.0),
+                rng.range(-4.0, 3.0),
+                rng.range(-1.0, 2.0),
+            );
+            let dir = Vector3::new(rng.normal(), rng.normal(), rng.normal());
+            let (a, b) = (
+                room.radiance_with(&textures, &origin, &dir),
+                room.radiance(&origin, &dir),
+            );
+            assert_eq!(a.to_bits(), b.to_bits(), "from {origin:?} along {dir:?}");
+        }
+    }
+
+    /// The table gives the very values of the hashing texture, inside its rectangle and out.
     #[test]
     fn texture_table_matches_the_texture() {
-        let table = TextureTable::new(0xBEEF, 16);
+        let table = TextureTable::new(0xBEEF, [-2.0, 3.0], [-1.0, 2.5]);
         let mut rng = Rng::derive(3, 1);
         for _ in 0..20_000 {
             // up to well outside the table (the finest octave reaches 8.5 times x)
