@@ -119,13 +119,18 @@ impl TextureTable {
             .zip(octave_frequencies())
             .map(|(&o, f)| {
                 let s = seed.wrapping_add(o);
-                // one lattice point of margin either side (and the +1 neighbour)
+                // one lattice point of margin either side (and the +1 neighbour); no table
+                // for a range that is not finite or too large
+                let finite = x_range.iter().chain(&y_range).all(|v| v.abs() < 1e12);
+                if !finite {
+                    return (0, 0, 0, 0, Vec::new());
+                }
                 let lo = |v: f64| (v * f).floor() as i64 - 1;
                 let hi = |v: f64| (v * f).floor() as i64 + 2;
                 let (x0, y0) = (lo(x_range[0]), lo(y_range[0]));
                 let nx = (hi(x_range[1]) - x0 + 1).max(0) as usize;
                 let ny = (hi(y_range[1]) - y0 + 1).max(0) as usize;
-                if nx.saturating_mul(ny) > MAX_TABLE || !(x_range[0] <= x_range[1]) {
+                if nx.saturating_mul(ny) > MAX_TABLE {
                     return (0, 0, 0, 0, Vec::new());
                 }
                 let values = (0..nx * ny)
