@@ -211,6 +211,11 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
         }
         if name == "high_jpeg" || (name == "typical" && size.0 < 640) {
             figures.push(Figure::lower("vignette.seconds", r.seconds, "s"));
+            figures.push(Figure::lower(
+                "vignette.seconds_per_100_frames",
+                r.seconds * 100.0 / size.2.max(1) as f64,
+                "s",
+            ));
             figures.push(Figure::lower("vignette.peak_rss_mb", r.peak_mb, "MB"));
         }
     }
