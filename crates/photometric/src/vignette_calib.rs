@@ -363,6 +363,10 @@ struct Problem<'a> {
     /// The order in which the passes visit the sample (positions in it): image tiles of
     /// [`TILE`] pixels a side, row by row (see [`tile_order`]).
     order: Vec<u32>,
+    /// The rays (x, y and z apart) and the pixel indices in the visiting order: the passes
+    /// read them in a row.
+    ordered_rays: [Vec<f32>; 3],
+    ordered_pix: Vec<u32>,
     size: ImageSize,
     /// `U` at every sample value of the frames' bit depth.
     u: &'a [f64],
@@ -664,12 +668,12 @@ impl PassCtx<'_, '_> {
         i: usize,
         pf: &Geom,
         data: &[S],
-        block: &[u32],
+        block: std::ops::Range<usize>,
         acc: &mut JobSums,
         b: &mut Batch,
     ) {
-        for chunk in block.chunks(BATCH) {
-            self.stages(pf, data, chunk, b);
+        for start in block.clone().step_by(BATCH) {
+            self.stages(pf, data, start..(start + BATCH).min(block.end), b);
             // stage 4: the weighted residuals into the sums
             match self.step {
                 Step::V => self.v_sums(i, pf, b, &mut acc.v, 0, None),
@@ -680,30 +684,43 @@ impl PassCtx<'_, '_> {
 
     /// Stages 1 to 3 of the observations of frame `pf` at the pixels `chunk` (at most
     /// [`BATCH`] positions in the problem's sample) into `b`.
-    fn stages<S: Copy + Into<u16>>(&self, pf: &Geom, data: &[S], chunk: &[u32], b: &mut Batch) {
+    fn stages<S: Copy + Into<u16>>(
+        &self,
+        pf: &Geom,
+        data: &[S],
+        ks: std::ops::Range<usize>,
+        b: &mut Batch,
+    ) {
         let p = self.p;
         let grid = p.grid;
         let g_last = (grid - 1) as f64;
         let g_max = (grid - 2) as f64;
         let m = &pf.m;
         {
+            let [rx, ry, rz] = &p.ordered_rays;
+            let (rx, ry, rz) = (&rx[ks.clone()], &ry[ks.clone()], &rz[ks.clone()]);
+            let (gxs, gys, inside) = (
+                &mut b.gx[..rx.len()],
+                &mut b.gy[..rx.len()],
+                &mut b.inside[..rx.len()],
+            );
             // stage 1: the rays' positions on the plane (H^-1 ray, see ray_to_grid)
-            for (j, &pos) in chunk.iter().enumerate() {
-                let r = p.rays[p.sample[pos as usize] as usize];
-                let r = [r[0] as f64, r[1] as f64, r[2] as f64];
+            for j in 0..rx.len() {
+                let r = [rx[j] as f64, ry[j] as f64, rz[j] as f64];
                 let w = m[2][0] * r[0] + m[2][1] * r[1] + m[2][2] * r[2];
                 let iw = 1.0 / w;
                 let gx = (m[0][0] * r[0] + m[0][1] * r[1] + m[0][2] * r[2]) * iw;
                 let gy = (m[1][0] * r[0] + m[1][1] * r[1] + m[1][2] * r[2]) * iw;
                 // in front of the camera (w = 1 / depth > 0) and inside the grid; NaN fails
-                b.inside[j] = w > 1e-12 && gx >= 0.0 && gy >= 0.0 && gx <= g_last && gy <= g_last;
-                b.gx[j] = gx;
-                b.gy[j] = gy;
+                inside[j] = w > 1e-12 && gx >= 0.0 && gy >= 0.0 && gx <= g_last && gy <= g_last;
+                gxs[j] = gx;
+                gys[j] = gy;
             }
             // stage 2: the observations kept (not saturated, on the plane) and their taps
             let mut n = 0;
-            for (j, &pos) in chunk.iter().enumerate() {
-                let k: u16 = data[p.sample[pos as usize] as usize].into();
+            let (order, pix) = (&p.order[ks.clone()], &p.ordered_pix[ks]);
+            for (j, (&pos, &px)) in order.iter().zip(pix).enumerate() {
+                let k: u16 = data[px as usize].into();
                 if k == self.top || !b.inside[j] {
                     continue;
                 }
@@ -958,6 +975,13 @@ fn tile_order(sample: &[u32], width: usize) -> Vec<u32> {
     order
 }
 
+/// The rays (x, y, z apart) and pixel indices of `sample` in the visiting `order`.
+fn ordered(rays: &[[f32; 3]], sample: &[u32], order: &[u32]) -> ([Vec<f32>; 3], Vec<u32>) {
+    let pix: Vec<u32> = order.iter().map(|&q| sample[q as usize]).collect();
+    let axis = |k: usize| pix.iter().map(|&i| rays[i as usize][k]).collect();
+    ([axis(0), axis(1), axis(2)], pix)
+}
+
 /// The jobs of [`fused_iteration`]: ranges of the problem's `order` made of whole bands of
 /// tiles (so that a job's pixels are a range of positions), [`PIXEL_JOBS`] of them.
 fn band_jobs(p: &Problem<'_>) -> Vec<std::ops::Range<usize>> {
@@ -1010,7 +1034,7 @@ fn fused_iteration(
     fold_frame_jobs(
         &jobs,
         |job| -> Result<FusedJob, PhotometricError> {
-            let order = &p.order[job];
+            let order = &p.order[job.clone()];
             // the positions of the job's pixels (whole bands: a range)
             let start = order.iter().min().map_or(0, |&q| q as usize);
             let end = order.iter().max().map_or(0, |&q| q as usize + 1);
@@ -1020,18 +1044,19 @@ fn fused_iteration(
             let mut new_v = vec![0.0f64; end - start];
             let mut batch = Batch::new();
             let mut kept = Vec::new();
-            for block in order.chunks(BATCH) {
+            for first in job.clone().step_by(BATCH) {
+                let block = first..(first + BATCH).min(job.end);
                 kept.clear();
                 for (vi, view) in views.iter().enumerate() {
                     let keep = Some((&mut kept, vi as u32));
                     match view.samples {
-                        SamplesRef::U8(d) => ctx.stages(&view.geom, d, block, &mut batch),
-                        SamplesRef::U16(d) => ctx.stages(&view.geom, d, block, &mut batch),
+                        SamplesRef::U8(d) => ctx.stages(&view.geom, d, block.clone(), &mut batch),
+                        SamplesRef::U16(d) => ctx.stages(&view.geom, d, block.clone(), &mut batch),
                     }
                     ctx.v_sums(view.i, &view.geom, &batch, &mut acc, start, keep);
                 }
                 // the block's new V (unscaled), and its observations' share of the C step
-                for &q in block {
+                for &q in &p.order[block] {
                     let (px, a) = (q as usize, q as usize - start);
                     new_v[a] = if acc.den[a] > 0.0 {
                         acc.num[a] / acc.den[a]
@@ -1127,12 +1152,15 @@ fn pass(
                 cden: vec![0.0f32; cells_needed],
             };
             let mut batch = Batch::new();
-            for block in p.order.chunks(PIXEL_BLOCK) {
+            for start in (0..p.order.len()).step_by(PIXEL_BLOCK) {
+                let block = start..(start + PIXEL_BLOCK).min(p.order.len());
                 for (i, pf) in &prepared {
                     match &pf.samples {
-                        Samples::U8(d) => ctx.observe(*i, &pf.geom, d, block, &mut acc, &mut batch),
+                        Samples::U8(d) => {
+                            ctx.observe(*i, &pf.geom, d, block.clone(), &mut acc, &mut batch)
+                        }
                         Samples::U16(d) => {
-                            ctx.observe(*i, &pf.geom, d, block, &mut acc, &mut batch)
+                            ctx.observe(*i, &pf.geom, d, block.clone(), &mut acc, &mut batch)
                         }
                     }
                 }
@@ -1362,6 +1390,8 @@ pub fn calibrate_vignette(
         rays: &rays,
         sample: Vec::new(),
         order: Vec::new(),
+        ordered_rays: Default::default(),
+        ordered_pix: Vec::new(),
         size,
         u,
         options,
@@ -1427,10 +1457,14 @@ pub fn calibrate_vignette(
                 })
             })
             .collect();
+        let order = tile_order(&sample, w);
+        let (ordered_rays, ordered_pix) = ordered(&rays, &sample, &order);
         let coarse = Problem {
             frames,
             rays: &rays,
-            order: tile_order(&sample, w),
+            order,
+            ordered_rays,
+            ordered_pix,
             sample,
             size,
             u,
@@ -1463,11 +1497,16 @@ pub fn calibrate_vignette(
             .collect();
         warm = Some((full_v, stage.model.noise));
     }
+    let full_sample: Vec<u32> = (0..npx as u32).collect();
+    let full_order = tile_order(&full_sample, w);
+    let (full_rays, full_pix) = ordered(&rays, &full_sample, &full_order);
     let problem = Problem {
         frames,
         rays: &rays,
-        sample: (0..npx as u32).collect(),
-        order: tile_order(&(0..npx as u32).collect::<Vec<_>>(), w),
+        sample: full_sample.clone(),
+        order: full_order,
+        ordered_rays: full_rays,
+        ordered_pix: full_pix,
         size,
         u,
         options,
