@@ -374,7 +374,34 @@ struct Problem<'a> {
     grid: usize,
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    /// The problem on the pixels `sample` (image indices), with its visiting order.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        frames: &'a dyn PlaneFrames,
+        rays: &'a [[f32; 3]],
+        sample: Vec<u32>,
+        size: ImageSize,
+        u: &'a [f64],
+        options: &'a VignetteOptions,
+        grid: usize,
+    ) -> Problem<'a> {
+        let order = tile_order(&sample, size.width);
+        let (ordered_rays, ordered_pix) = ordered(rays, &sample, &order);
+        Problem {
+            frames,
+            rays,
+            sample,
+            order,
+            ordered_rays,
+            ordered_pix,
+            size,
+            u,
+            options,
+            grid,
+        }
+    }
+
     /// The saturated sample value, `2^bits - 1`.
     fn top(&self) -> u16 {
         (self.u.len() - 1) as u16
@@ -660,7 +687,20 @@ impl Batch {
     }
 }
 
-impl PassCtx<'_, '_> {
+impl<'a, 'p> PassCtx<'a, 'p> {
+    fn new(p: &'a Problem<'p>, model: &'a Model, tables: &'a Tables, step: Step) -> Self {
+        PassCtx {
+            p,
+            model,
+            tables,
+            reg2: p.options.registration_px * p.options.registration_px,
+            out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
+            top: p.top(),
+            step,
+            tiles_x: p.grid.div_ceil(8),
+        }
+    }
+
     /// The observations of frame `pf` (frame `i`) at the pixels `block` (positions in the
     /// problem's sample) into `acc`.
     fn observe<S: Copy + Into<u16>>(
@@ -1017,16 +1057,7 @@ fn fused_iteration(
     let npx = p.sample.len();
     let ncell = cells(p.grid);
     let levels = p.u.len();
-    let ctx = PassCtx {
-        p,
-        model,
-        tables,
-        reg2: p.options.registration_px * p.options.registration_px,
-        out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
-        top: p.top(),
-        step: Step::V,
-        tiles_x: p.grid.div_ceil(8),
-    };
+    let ctx = PassCtx::new(p, model, tables, Step::V);
     let jobs = band_jobs(p);
     let mut total = VSums::new(npx, levels);
     let mut num_total = vec![0.0f64; ncell];
@@ -1097,13 +1128,23 @@ fn fused_iteration(
             }
         },
     )?;
-    let mut c = model.c.clone();
-    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
-        if *de > 0.0 {
-            *cj = (*cj as f64 + nu / de).max(0.0) as f32;
-        }
-    }
-    Ok((total, c))
+    Ok((total, c_step(&model.c, &num_total, &den_total)))
+}
+
+/// The C step's new `C` from its sums per cell: `c + num / den` where a cell has any,
+/// at least 0.
+fn c_step(c: &[f32], num: &[f64], den: &[f64]) -> Vec<f32> {
+    c.iter()
+        .zip(num)
+        .zip(den)
+        .map(|((&c, nu), de)| {
+            if *de > 0.0 {
+                (c as f64 + nu / de).max(0.0) as f32
+            } else {
+                c
+            }
+        })
+        .collect()
 }
 
 /// One pass over the data with `V` and `C` as they are: the sums of the V step (the exact
@@ -1118,16 +1159,7 @@ fn pass(
 ) -> Result<(VSums, Vec<f32>), PhotometricError> {
     let ncell = cells(p.grid);
     let u = p.u;
-    let ctx = PassCtx {
-        p,
-        model,
-        tables,
-        reg2: p.options.registration_px * p.options.registration_px,
-        out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
-        top: p.top(),
-        step,
-        tiles_x: p.grid.div_ceil(8),
-    };
+    let ctx = PassCtx::new(p, model, tables, step);
     let (npx, cells_needed) = match step {
         Step::V => (p.sample.len(), 0),
         Step::C => (0, ncell),
@@ -1177,13 +1209,7 @@ fn pass(
             }
         },
     )?;
-    let mut c = model.c.clone();
-    for ((cj, nu), de) in c.iter_mut().zip(&num_total).zip(&den_total) {
-        if *de > 0.0 {
-            *cj = (*cj as f64 + nu / de).max(0.0) as f32;
-        }
-    }
-    Ok((total, c))
+    Ok((total, c_step(&model.c, &num_total, &den_total)))
 }
 
 /// Union-find over pixels and plane cells, on 8x8 pixel blocks and 8x8 cell tiles: the
@@ -1385,18 +1411,15 @@ pub fn calibrate_vignette(
     };
     let u = &table[..];
     // observability: one connected part, image corners covered
-    let (parts, labels) = components(&Problem {
+    let (parts, labels) = components(&Problem::new(
         frames,
-        rays: &rays,
-        sample: Vec::new(),
-        order: Vec::new(),
-        ordered_rays: Default::default(),
-        ordered_pix: Vec::new(),
+        &rays,
+        Vec::new(),
         size,
         u,
         options,
         grid,
-    })?;
+    ))?;
     if parts == 0 {
         return Err(PhotometricError::Calibration(
             "no pixel of any frame sees the calibration plane".into(),
@@ -1457,20 +1480,7 @@ pub fn calibrate_vignette(
                 })
             })
             .collect();
-        let order = tile_order(&sample, w);
-        let (ordered_rays, ordered_pix) = ordered(&rays, &sample, &order);
-        let coarse = Problem {
-            frames,
-            rays: &rays,
-            order,
-            ordered_rays,
-            ordered_pix,
-            sample,
-            size,
-            u,
-            options,
-            grid: grid / stride,
-        };
+        let coarse = Problem::new(frames, &rays, sample, size, u, options, grid / stride);
         let stage = solve(
             &coarse,
             None,
@@ -1497,21 +1507,8 @@ pub fn calibrate_vignette(
             .collect();
         warm = Some((full_v, stage.model.noise));
     }
-    let full_sample: Vec<u32> = (0..npx as u32).collect();
-    let full_order = tile_order(&full_sample, w);
-    let (full_rays, full_pix) = ordered(&rays, &full_sample, &full_order);
-    let problem = Problem {
-        frames,
-        rays: &rays,
-        sample: full_sample.clone(),
-        order: full_order,
-        ordered_rays: full_rays,
-        ordered_pix: full_pix,
-        size,
-        u,
-        options,
-        grid,
-    };
+    let all = (0..npx as u32).collect();
+    let problem = Problem::new(frames, &rays, all, size, u, options, grid);
     let stage = solve(
         &problem,
         warm,

@@ -237,21 +237,17 @@ impl PlaneSequence {
         move |x, y| {
             let mut rad = 0.0;
             for ray in &rays[(y * w + x) * SUBPIXELS.len()..][..SUBPIXELS.len()] {
+                // (NaN: the camera has no ray there)
+                let ray = Vector3::from(*ray);
+                let nr = n.dot(&ray);
+                let lam = nt / nr;
                 rad += 0.25
-                    * match ray[0].is_nan() {
-                        false => {
-                            let ray = Vector3::from(*ray);
-                            let nr = n.dot(&ray);
-                            let lam = nt / nr;
-                            if nr.abs() < 1e-12 || lam <= 0.0 {
-                                0.05
-                            } else {
-                                // plane = R^T (X - t)
-                                let plane = r.tr_mul(&(ray * lam - tr));
-                                self.radiance(plane[0], plane[1])
-                            }
-                        }
-                        true => 0.05,
+                    * if ray[0].is_nan() || nr.abs() < 1e-12 || lam <= 0.0 {
+                        0.05
+                    } else {
+                        // plane = R^T (X - t)
+                        let plane = r.tr_mul(&(ray * lam - tr));
+                        self.radiance(plane[0], plane[1])
                     };
             }
             GAIN * t * self.vignette[y * w + x] as f64 * rad
