@@ -28,6 +28,7 @@
 
 mod atomic;
 mod error;
+mod ordered;
 mod outdir;
 mod png;
 mod results;

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use camera_model::{CameraFile, Image, ImageSize};
-use rayon::prelude::*;
 
+use crate::ordered::for_each_ordered;
 use crate::times::{parse_times, Times};
 use crate::zipimages::is_image_name;
 use crate::{read_text, DatasetError, ImagesZip};
@@ -555,7 +555,7 @@ impl Sequence {
         indices: &[usize],
         chunk: usize,
         work: W,
-        mut sink: S,
+        sink: S,
     ) -> Result<(), E>
     where
         T: Send,
@@ -563,16 +563,12 @@ impl Sequence {
         W: Fn(NativeFrame) -> Result<T, E> + Sync,
         S: FnMut(T) -> Result<(), E>,
     {
-        for part in indices.chunks(chunk.max(1)) {
-            let out: Vec<Result<T, E>> = part
-                .par_iter()
-                .map(|&k| work(self.frame_native(k)?))
-                .collect();
-            for r in out {
-                sink(r?)?;
-            }
-        }
-        Ok(())
+        for_each_ordered(
+            indices.len(),
+            chunk,
+            |i| work(self.frame_native(indices[i])?),
+            sink,
+        )
     }
 
     /// Frame `k`: decoded image, timestamp and exposure.
@@ -599,14 +595,16 @@ impl Sequence {
     }
 
     /// Decodes the frames `indices` in parallel and hands `work`'s results to `sink` in the
-    /// order of `indices`. Work runs in parallel chunks of `chunk` frames, so memory stays
-    /// flat in the number of frames. Stops at the first error.
+    /// order of `indices`. At most `chunk` frames are in flight at a time (decoded, worked on,
+    /// or waiting for their turn), so memory stays flat in the number of frames; `sink` runs
+    /// on the calling thread while the next frames are being decoded. Stops at the first
+    /// error in the order of `indices`.
     pub fn process<T, E, W, S>(
         &self,
         indices: &[usize],
         chunk: usize,
         work: W,
-        mut sink: S,
+        sink: S,
     ) -> Result<(), E>
     where
         T: Send,
@@ -614,12 +612,11 @@ impl Sequence {
         W: Fn(Frame) -> Result<T, E> + Sync,
         S: FnMut(T) -> Result<(), E>,
     {
-        for part in indices.chunks(chunk.max(1)) {
-            let out: Vec<Result<T, E>> = part.par_iter().map(|&k| work(self.frame(k)?)).collect();
-            for r in out {
-                sink(r?)?;
-            }
-        }
-        Ok(())
+        for_each_ordered(
+            indices.len(),
+            chunk,
+            |i| work(self.frame(indices[i])?),
+            sink,
+        )
     }
 }
