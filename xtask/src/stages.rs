@@ -413,7 +413,4 @@ impl photometric::PlaneFrames for MemoryPlaneFrames {
             pose: photometric::PlanePose { r: p.r, t: p.t },
         })
     }
-    fn samples_in_memory(&self, i: usize) -> Option<&photometric::PlaneImage> {
-        self.images.get(i)
-    }
 }

@@ -417,8 +417,10 @@ impl Sums {
 /// What one iteration needs to know about the current model.
 struct Model<'a> {
     fwd: Forward,
-    /// Variance per knot.
+    /// Variance per knot, and its inverse (the passes multiply: a division per observation
+    /// took a quarter of their time).
     var: Vec<f64>,
+    ivar: Vec<f64>,
     /// The frames' grey values and the knots.
     levels: Levels,
     /// Selection range of predicted grey values (reported) and the energies it maps to
@@ -477,6 +479,12 @@ impl Model<'_> {
     fn var_at(&self, j: usize, f: f64) -> f64 {
         self.var[if f < 0.5 { j } else { j + 1 }]
     }
+
+    /// `1 / var_at(j, f)`.
+    #[inline]
+    fn ivar_at(&self, j: usize, f: f64) -> f64 {
+        self.ivar[if f < 0.5 { j } else { j + 1 }]
+    }
 }
 
 /// Rows per chunk of the passes: the chunks are also the independent units of the sandwich
@@ -518,7 +526,7 @@ fn pass_chunk<T: Sample>(
             let b = state[x].b;
             if b.is_finite() {
                 if let Some((j, fr, c)) = model.select(t, b) {
-                    let w = c / model.var_at(j, fr);
+                    let w = c * model.ivar_at(j, fr);
                     let jac = t * fwd.inv_du[j];
                     let r = kf - (j as f64 + fr);
                     sjr[x] += w * jac * r;
@@ -558,6 +566,7 @@ fn pass_chunk<T: Sample>(
     let mut sums = Sums::new(lv.knots);
     let mut rr = vec![0.0f64; n];
     let mut rn = vec![0u32; n];
+    let inv_s: Vec<f64> = state.iter().map(|st| 1.0 / st.s).collect();
     for (i, (f, &t)) in frames.iter().zip(model.exposures).enumerate() {
         let px = &f.data()[start..start + n];
         let mk = &masks[i];
@@ -570,11 +579,11 @@ fn pass_chunk<T: Sample>(
             let Some((j, fr, c)) = model.select(t, st.b) else {
                 continue;
             };
-            let var = model.var_at(j, fr);
+            let ivar = model.ivar_at(j, fr);
             let r = lv.pos(k) - (j as f64 + fr);
-            rr[x] += r * r / var;
+            rr[x] += r * r * ivar;
             rn[x] += 1;
-            let w = c / (var * st.s);
+            let w = c * ivar * inv_s[x];
             // the residual's derivatives: d r / d U(j) = (1 - f) / dU, d r / d U(j+1) = f / dU
             let a0 = (1.0 - fr) * fwd.inv_du[j];
             let a1 = fr * fwd.inv_du[j];
@@ -1059,6 +1068,12 @@ fn initial_response<T: Sample>(
                 }
                 let mut sum = vec![0.0f64; n];
                 let mut cnt = vec![0.0f64; n];
+                // B' per pixel, once (NaN where no observation is in range)
+                let bs: Vec<f64> = num
+                    .iter()
+                    .zip(&den)
+                    .map(|(&a, &d)| if d > 0.0 { a / d } else { f64::NAN })
+                    .collect();
                 for (f, &t) in frames.iter().zip(exposures) {
                     for (x, &k) in f.data()[start..start + m].iter().enumerate() {
                         let p = levels.pos(k.raw());
@@ -1067,7 +1082,7 @@ fn initial_response<T: Sample>(
                             // neighbouring knots
                             let j = (p as usize).min(n - 2);
                             let f = p - j as f64;
-                            let e = t * num[x] / den[x];
+                            let e = t * bs[x];
                             sum[j] += (1.0 - f) * e;
                             cnt[j] += 1.0 - f;
                             sum[j + 1] += f * e;
@@ -1263,6 +1278,7 @@ impl<T: Sample> Solver<'_, T> {
             }
             let model = Model {
                 fwd: Forward::new(&u),
+                ivar: var.iter().map(|v| 1.0 / v).collect(),
                 var: var.clone(),
                 levels: self.levels,
                 lo,
@@ -1370,10 +1386,14 @@ impl<T: Sample> Solver<'_, T> {
     }
 }
 
-/// `u` scaled to `U(top) = 255`.
+/// `u` scaled to `U(top) = 255` (exactly: the product with the scale can be an ulp off).
 fn normalized(u: &[f64]) -> Vec<f64> {
     let s = 255.0 / u[u.len() - 1];
-    u.iter().map(|v| v * s).collect()
+    let mut out: Vec<f64> = u.iter().map(|v| v * s).collect();
+    if let Some(last) = out.last_mut() {
+        *last = 255.0;
+    }
+    out
 }
 
 /// Standard errors of the normalised table: the sandwich covariance of the last Newton step

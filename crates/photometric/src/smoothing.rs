@@ -75,17 +75,28 @@ fn box_rows(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
     }
 }
 
-/// One box pass of radius `r` along columns.
+/// One box pass of radius `r` along columns: a window of rows slides down the image, so
+/// that every row is read in order (a column at a time would stride through memory).
 fn box_cols(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
-    let mut prefix = vec![0.0f64; h + 1];
-    for x in 0..w {
-        for y in 0..h {
-            prefix[y + 1] = prefix[y] + src[y * w + x];
+    let row = |y: usize| &src[y * w..(y + 1) * w];
+    let mut acc = vec![0.0f64; w];
+    for y in 0..(r + 1).min(h) {
+        for (a, v) in acc.iter_mut().zip(row(y)) {
+            *a += v;
         }
-        for y in 0..h {
-            let lo = y.saturating_sub(r);
-            let hi = (y + r + 1).min(h);
-            out[y * w + x] = prefix[hi] - prefix[lo];
+    }
+    for y in 0..h {
+        out[y * w..(y + 1) * w].copy_from_slice(&acc);
+        // the window of row y + 1: rows y + 1 - r ..= y + 1 + r
+        if y + r + 1 < h {
+            for (a, v) in acc.iter_mut().zip(row(y + r + 1)) {
+                *a += v;
+            }
+        }
+        if y >= r {
+            for (a, v) in acc.iter_mut().zip(row(y - r)) {
+                *a -= v;
+            }
         }
     }
 }
@@ -351,9 +362,14 @@ pub(crate) fn choose_smoothing(
     // plane irradiance correlate neighbours. The same smoothing of the odd and of the even
     // half differs by noise alone: its spread calibrates the smoothed map's variance
     // (each half has about twice the variance of the whole: four times for the difference)
-    if radius > 0 {
-        let (so, _) = local_linear(odd, &wt, w, h, radius, false);
-        let (se, _) = local_linear(even, &wt, w, h, radius, false);
+    // the halves smoothed as the whole is (for the variance's scale and the bias below)
+    let halves = (radius > 0).then(|| {
+        (
+            local_linear(odd, &wt, w, h, radius, false).0,
+            local_linear(even, &wt, w, h, radius, false).0,
+        )
+    });
+    if let Some((so, se)) = &halves {
         let (mut num, mut den) = (0.0, 0.0);
         for i in 0..n {
             if wt[i] > 0.0 && so[i].is_finite() && se[i].is_finite() && var[i] > 0.0 {
@@ -373,11 +389,9 @@ pub(crate) fn choose_smoothing(
     // V, with the noise already averaged out), and it enters the variance in quadrature
     // (that difference still carries some noise, measured by the same difference of the odd
     // and of the even half and taken out; the squared bias is averaged over the kernel)
-    if radius > 0 {
+    if let Some((so, se)) = &halves {
         let again = |m: &[f64]| local_linear(m, &wt, w, h, radius, false).0;
-        let (so, _) = local_linear(odd, &wt, w, h, radius, false);
-        let (se, _) = local_linear(even, &wt, w, h, radius, false);
-        let (tf, to, te) = (again(&smoothed), again(&so), again(&se));
+        let (tf, to, te) = (again(&smoothed), again(so), again(se));
         let b2: Vec<f64> = (0..n)
             .map(|i| {
                 let d = tf[i] - smoothed[i];

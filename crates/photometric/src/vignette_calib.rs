@@ -103,13 +103,6 @@ pub trait PlaneFrames: Sync {
     }
     /// Frame `i`.
     fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError>;
-    /// Frame `i`'s samples, if the source keeps them in memory (the same as
-    /// `frame(i)?.image`). When every frame's are, the calibration visits the data once per
-    /// iteration instead of twice, in an order that needs them all at hand. `None` (the
-    /// default): the frames are decoded on demand.
-    fn samples_in_memory(&self, _i: usize) -> Option<&PlaneImage> {
-        None
-    }
 }
 
 /// Options of [`calibrate_vignette`].
@@ -141,6 +134,10 @@ pub struct VignetteOptions {
     /// Smoothing of the recommended map (standard deviation in pixels); `None` chooses it by
     /// cross-validation.
     pub smoothing_px: Option<f64>,
+    /// The frames' samples are kept in memory for the iterations when they fit in this many
+    /// MiB (one byte per pixel and frame, two above 8 bits); beyond, every pass decodes the
+    /// frames again, and memory does not grow with their number (0: always decode).
+    pub memory_mb: usize,
 }
 
 impl Default for VignetteOptions {
@@ -155,6 +152,7 @@ impl Default for VignetteOptions {
             min_observations: 8,
             registration_px: 0.25,
             smoothing_px: None,
+            memory_mb: 160,
         }
     }
 }
@@ -319,6 +317,32 @@ fn cells(grid: usize) -> usize {
     grid.div_ceil(8) * grid.div_ceil(8) * 64
 }
 
+/// The storage indices of the four bilinear taps whose first is `at` (see [`cell`]): the
+/// neighbours in x and in y, across tile borders where `at` ends a tile's row or column.
+#[inline]
+fn taps(at: usize, tiles_x: usize) -> [usize; 4] {
+    let dx = if at & 7 == 7 { 57 } else { 1 };
+    let dy = if (at >> 3) & 7 == 7 {
+        tiles_x * 64 - 56
+    } else {
+        8
+    };
+    [at, at + dx, at + dy, at + dy + dx]
+}
+
+/// The Morton (Z-order) index of `(x, y)`: near cells get near indices.
+fn morton(x: u32, y: u32) -> u64 {
+    let spread = |v: u32| {
+        let mut v = v as u64 & 0xffff_ffff;
+        v = (v | (v << 16)) & 0x0000_ffff_0000_ffff;
+        v = (v | (v << 8)) & 0x00ff_00ff_00ff_00ff;
+        v = (v | (v << 4)) & 0x0f0f_0f0f_0f0f_0f0f;
+        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
+        (v | (v << 1)) & 0x5555_5555_5555_5555
+    };
+    spread(x) | (spread(y) << 1)
+}
+
 /// The samples of a frame, row-major.
 enum Samples {
     U8(Vec<u8>),
@@ -338,8 +362,7 @@ impl Samples {
 struct Prepared {
     /// The raw samples (checked to be at most the problem's `top`).
     samples: Samples,
-    /// Their bit depth.
-    bits: u32,
+    pose: PlanePose,
     geom: Geom,
 }
 
@@ -361,12 +384,18 @@ struct Problem<'a> {
     /// sample); `V` is indexed by their position here.
     sample: Vec<u32>,
     /// The order in which the passes visit the sample (positions in it): image tiles of
-    /// [`TILE`] pixels a side, row by row (see [`tile_order`]).
+    /// [`TILE_W`] x [`TILE_H`] pixels, row by row (see [`tile_order`]).
     order: Vec<u32>,
     /// The rays (x, y and z apart) and the pixel indices in the visiting order: the passes
     /// read them in a row.
     ordered_rays: [Vec<f32>; 3],
     ordered_pix: Vec<u32>,
+    /// Blocks of at most [`BATCH`] consecutive positions of the order inside one band of
+    /// tiles: a pass over frames in memory visits every frame for one block before the next.
+    blocks: Vec<std::ops::Range<usize>>,
+    /// The parallel jobs of such a pass: ranges of blocks made of whole bands (a job's
+    /// pixels are a range of positions), [`PIXEL_JOBS`] of them.
+    jobs: Vec<std::ops::Range<usize>>,
     size: ImageSize,
     /// `U` at every sample value of the frames' bit depth.
     u: &'a [f64],
@@ -388,6 +417,7 @@ impl<'a> Problem<'a> {
     ) -> Problem<'a> {
         let order = tile_order(&sample, size.width);
         let (ordered_rays, ordered_pix) = ordered(rays, &sample, &order);
+        let (blocks, jobs) = blocks_and_jobs(&ordered_pix, size.width);
         Problem {
             frames,
             rays,
@@ -395,6 +425,8 @@ impl<'a> Problem<'a> {
             order,
             ordered_rays,
             ordered_pix,
+            blocks,
+            jobs,
             size,
             u,
             options,
@@ -410,9 +442,24 @@ impl<'a> Problem<'a> {
     fn prepare(&self, i: usize) -> Result<Option<Prepared>, PhotometricError> {
         let frame = self.frames.frame(i)?;
         check_frame(&frame, self.size, self.u.len(), i)?;
-        let Some(m) = ray_to_grid(&frame.pose, self.grid, self.options.extent) else {
+        let Some(geom) = self.geom(&frame.pose, frame.exposure_ms) else {
             return Ok(None);
         };
+        let samples = match frame.image {
+            PlaneImage::U8(i) => Samples::U8(i.into_data()),
+            PlaneImage::U16 { image, .. } => Samples::U16(image.into_data()),
+        };
+        Ok(Some(Prepared {
+            samples,
+            pose: frame.pose,
+            geom,
+        }))
+    }
+
+    /// What the passes need of a frame with plane pose `pose` besides its samples, on this
+    /// problem's grid (`None` for a pose that does not map the image onto the plane).
+    fn geom(&self, pose: &PlanePose, exposure_ms: f64) -> Option<Geom> {
+        let m = ray_to_grid(pose, self.grid, self.options.extent)?;
         let (w, h) = (self.size.width, self.size.height);
         let c = (h / 2) * w + w / 2;
         let cells_per_px = match (
@@ -422,21 +469,11 @@ impl<'a> Problem<'a> {
             (Some(a), Some(b)) => ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt(),
             _ => 1.0,
         };
-        let exposure_ms = frame.exposure_ms;
-        let bits = frame.image.bits();
-        let samples = match frame.image {
-            PlaneImage::U8(i) => Samples::U8(i.into_data()),
-            PlaneImage::U16 { image, .. } => Samples::U16(image.into_data()),
-        };
-        Ok(Some(Prepared {
-            samples,
-            bits,
-            geom: Geom {
-                exposure_ms,
-                m,
-                cells_per_px,
-            },
-        }))
+        Some(Geom {
+            exposure_ms,
+            m,
+            cells_per_px,
+        })
     }
 }
 
@@ -634,15 +671,49 @@ struct PassCtx<'a, 'p> {
     out2: f64,
     top: u16,
     step: Step,
+    /// Whether the V step takes the statistics too (see [`PassCtx::v_sums`]).
+    stats: bool,
     tiles_x: usize,
 }
 
-/// The sums of one job: the V step's per pixel, or the C step's per cell.
+/// The sums of one job: the V step's per pixel, or the C step's per cell (numerator and
+/// denominator side by side: one cache line).
 struct JobSums {
     v: VSums,
-    cnum: Vec<f32>,
-    cden: Vec<f32>,
+    cacc: Vec<[f32; 2]>,
 }
+
+/// Where the stages read the samples of a batch: `sample(j, px)` is the sample of the
+/// batch's `j`-th position, at pixel `px`.
+trait SampleSource: Copy {
+    fn sample(self, j: usize, px: u32) -> u16;
+}
+
+/// A frame's samples, row-major: by pixel.
+#[derive(Clone, Copy)]
+struct RowMajor<'a, S>(&'a [S]);
+
+impl<S: Copy + Into<u16>> SampleSource for RowMajor<'_, S> {
+    #[inline]
+    fn sample(self, _j: usize, px: u32) -> u16 {
+        self.0[px as usize].into()
+    }
+}
+
+/// A block's samples from the store: by position.
+#[derive(Clone, Copy)]
+struct InBlock<'a, S>(&'a [S]);
+
+impl<S: Copy + Into<u16>> SampleSource for InBlock<'_, S> {
+    #[inline]
+    fn sample(self, j: usize, _px: u32) -> u16 {
+        self.0[j].into()
+    }
+}
+
+/// The splats of the C step visit the observations of a batch this many apart (see
+/// [`PassCtx::splat_kept`]).
+const SPLAT_STRIDE: usize = 4;
 
 /// Observations per batch of a pass's stages.
 const BATCH: usize = 256;
@@ -688,7 +759,13 @@ impl Batch {
 }
 
 impl<'a, 'p> PassCtx<'a, 'p> {
-    fn new(p: &'a Problem<'p>, model: &'a Model, tables: &'a Tables, step: Step) -> Self {
+    fn new(
+        p: &'a Problem<'p>,
+        model: &'a Model,
+        tables: &'a Tables,
+        step: Step,
+        stats: bool,
+    ) -> Self {
         PassCtx {
             p,
             model,
@@ -697,6 +774,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             out2: p.options.outlier_sigmas * p.options.outlier_sigmas,
             top: p.top(),
             step,
+            stats,
             tiles_x: p.grid.div_ceil(8),
         }
     }
@@ -713,10 +791,11 @@ impl<'a, 'p> PassCtx<'a, 'p> {
         b: &mut Batch,
     ) {
         for start in block.clone().step_by(BATCH) {
-            self.stages(pf, data, start..(start + BATCH).min(block.end), b);
+            self.stages(pf, RowMajor(data), start..(start + BATCH).min(block.end), b);
             // stage 4: the weighted residuals into the sums
             match self.step {
-                Step::V => self.v_sums(i, pf, b, &mut acc.v, 0, None),
+                Step::V if self.stats => self.v_sums::<true>(i, pf, b, &mut acc.v, 0, None),
+                Step::V => self.v_sums::<false>(i, pf, b, &mut acc.v, 0, None),
                 Step::C => self.c_sums(pf, b, acc),
             }
         }
@@ -724,10 +803,10 @@ impl<'a, 'p> PassCtx<'a, 'p> {
 
     /// Stages 1 to 3 of the observations of frame `pf` at the pixels `chunk` (at most
     /// [`BATCH`] positions in the problem's sample) into `b`.
-    fn stages<S: Copy + Into<u16>>(
+    fn stages<S: SampleSource>(
         &self,
         pf: &Geom,
-        data: &[S],
+        data: S,
         ks: std::ops::Range<usize>,
         b: &mut Batch,
     ) {
@@ -760,7 +839,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             let mut n = 0;
             let (order, pix) = (&p.order[ks.clone()], &p.ordered_pix[ks]);
             for (j, (&pos, &px)) in order.iter().zip(pix).enumerate() {
-                let k: u16 = data[px as usize].into();
+                let k = data.sample(j, px);
                 if k == self.top || !b.inside[j] {
                     continue;
                 }
@@ -769,21 +848,9 @@ impl<'a, 'p> PassCtx<'a, 'p> {
                 let x0 = gx.min(g_max) as u32 as usize;
                 let y0 = gy.min(g_max) as u32 as usize;
                 let at = cell(x0, y0, grid);
-                // the neighbours, across tile borders where x0 or y0 ends a tile
-                let dx = if x0 & 7 == 7 { 57 } else { 1 };
-                let dy = if y0 & 7 == 7 {
-                    self.tiles_x * 64 - 56
-                } else {
-                    8
-                };
                 b.pos[n] = pos;
                 b.k[n] = k;
-                b.idx[n] = [
-                    at as u32,
-                    (at + dx) as u32,
-                    (at + dy) as u32,
-                    (at + dy + dx) as u32,
-                ];
+                b.idx[n] = taps(at, self.tiles_x).map(|i| i as u32);
                 b.frac[n] = [gx - x0 as f64, gy - y0 as f64];
                 n += 1;
             }
@@ -807,26 +874,28 @@ impl<'a, 'p> PassCtx<'a, 'p> {
     }
 
     /// The V step's sums of a batch.
-    /// `vs` holds the pixels from position `offset` on; with `keep`, the observations that
-    /// the C step takes are kept there (`view` is the frame's index among the views).
-    #[allow(clippy::too_many_arguments)]
-    fn v_sums(
+    /// `vs` holds the pixels from position `offset` on. With `STATS`, also the per-pixel
+    /// counts, the odd frames' sums and the residual statistics (the noise model's fit and
+    /// the result need them; the iterations with a fixed noise model do not). With `keep`,
+    /// the observations that the C step takes are appended there.
+    fn v_sums<const STATS: bool>(
         &self,
         i: usize,
         pf: &Geom,
         b: &Batch,
         vs: &mut VSums,
         offset: usize,
-        mut keep: Option<(&mut Vec<Kept>, u32)>,
+        mut keep: Option<&mut Vec<Kept>>,
     ) {
         let (model, tables, u) = (self.model, self.tables, self.p.u);
         let t = pf.exposure_ms;
         let odd = i % 2 == 1;
         let reg = self.reg2 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+        let reject = model.reject;
         for j in 0..b.n {
-            let px = b.pos[j] as usize;
-            let (cq, vx) = (b.cq[j], model.v[px]);
-            let px = px - offset;
+            let pos = b.pos[j] as usize;
+            let (cq, vx) = (b.cq[j], model.v[pos]);
+            let px = pos - offset;
             let tv = t * vx;
             // (observations where C is 0 count for the C step: it moves C from there)
             if !(tv > 0.0 && cq >= 0.0) {
@@ -839,22 +908,22 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             // sensor noise plus the error a misregistration makes where C has edges
             let vr = tables.var[bin] + tv * tv * b.grad2[j] * reg;
             let r = obs - pred;
-            if model.reject && r * r > self.out2 * vr {
-                if cq > 0.0 {
+            if reject && r * r > self.out2 * vr {
+                if STATS && cq > 0.0 {
                     vs.outliers += 1;
                 }
                 continue;
             }
             let w = 1.0 / vr;
-            if let Some((kept, view)) = keep.as_mut() {
+            if let Some(kept) = keep.as_mut() {
+                let [fx, fy] = b.frac[j];
                 kept.push(Kept {
-                    px: b.pos[j],
-                    view: *view,
-                    idx: b.idx[j],
-                    frac: [b.frac[j][0] as f32, b.frac[j][1] as f32],
-                    obs: obs as f32,
-                    cq: cq as f32,
+                    at: b.idx[j][0],
+                    wo: (w * obs) as f32,
+                    wc: (w * cq) as f32,
                     w: w as f32,
+                    frac: [(fx * FRAC_ONE + 0.5) as u16, (fy * FRAC_ONE + 0.5) as u16],
+                    px: px as u32,
                 });
             }
             if cq == 0.0 {
@@ -863,18 +932,51 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             let wtc = w * tc;
             vs.num[px] += wtc * obs;
             vs.den[px] += wtc * tc;
-            if odd {
-                vs.num_odd[px] += wtc * obs;
-                vs.den_odd[px] += wtc * tc;
-            }
-            vs.counts[px] += 1;
-            vs.chi2 += r * r * w;
             vs.nobs += 1;
-            vs.pred2 += pred * pred;
-            vs.res2 += r * r;
-            let kp = tables.grey[bin] as usize;
-            vs.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
-            vs.rcnt[kp] += 1.0;
+            if STATS {
+                if odd {
+                    vs.num_odd[px] += wtc * obs;
+                    vs.den_odd[px] += wtc * tc;
+                }
+                vs.counts[px] += 1;
+                vs.chi2 += r * r * w;
+                vs.pred2 += pred * pred;
+                vs.res2 += r * r;
+                let kp = tables.grey[bin] as usize;
+                vs.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
+                vs.rcnt[kp] += 1.0;
+            }
+        }
+    }
+
+    /// The C step's share of kept observations of one frame (exposure `t`), with the new
+    /// `V` of their block (`new_v`, indexed by [`Kept::px`]).
+    fn splat_kept(&self, kept: &[Kept], t: f64, new_v: &[f64], cacc: &mut [[f32; 2]]) {
+        let unit = 1.0 / FRAC_ONE as f32;
+        // neighbouring observations share taps: visited a few apart, consecutive updates of
+        // one cell do not wait on each other
+        let interleaved = (0..SPLAT_STRIDE).flat_map(|s| kept.iter().skip(s).step_by(SPLAT_STRIDE));
+        for o in interleaved {
+            let tv = t * new_v[o.px as usize];
+            // (a NaN V fails too)
+            if tv.is_nan() || tv <= 0.0 {
+                continue;
+            }
+            // w tV r and w tV^2, with r = U - tV C
+            let num = (tv * (o.wo as f64 - tv * o.wc as f64)) as f32;
+            let den = (o.w as f64 * tv * tv) as f32;
+            let (fx, fy) = (o.frac[0] as f32 * unit, o.frac[1] as f32 * unit);
+            let wt = [
+                (1.0 - fx) * (1.0 - fy),
+                fx * (1.0 - fy),
+                (1.0 - fx) * fy,
+                fx * fy,
+            ];
+            for (at, wt) in taps(o.at as usize, self.tiles_x).into_iter().zip(wt) {
+                let c = &mut cacc[at];
+                c[0] += wt * num;
+                c[1] += wt * den;
+            }
         }
     }
 
@@ -882,10 +984,11 @@ impl<'a, 'p> PassCtx<'a, 'p> {
     /// moves `C` from there).
     fn c_sums(&self, pf: &Geom, b: &Batch, acc: &mut JobSums) {
         let reg = self.reg2 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
-        for j in 0..b.n {
+        let interleaved = (0..SPLAT_STRIDE).flat_map(|s| (s..b.n).step_by(SPLAT_STRIDE));
+        for j in interleaved {
             let vx = self.model.v[b.pos[j] as usize];
             let o = (b.k[j], b.idx[j], b.frac[j], b.cq[j], b.grad2[j]);
-            self.c_one(pf.exposure_ms, reg, vx, o, &mut acc.cnum, &mut acc.cden);
+            self.c_one(pf.exposure_ms, reg, vx, o, &mut acc.cacc);
         }
     }
 
@@ -898,8 +1001,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
         reg: f64,
         vx: f64,
         (k, idx, [fx, fy], cq, grad2): (u16, [u32; 4], [f64; 2], f64, f64),
-        cnum: &mut [f32],
-        cden: &mut [f32],
+        cacc: &mut [[f32; 2]],
     ) {
         let tables = self.tables;
         let tv = t * vx;
@@ -922,95 +1024,222 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             (fx * fy) as f32,
         ];
         for (&at, wt) in idx.iter().zip(wt) {
-            cnum[at as usize] += wt * num;
-            cden[at as usize] += wt * den;
+            let c = &mut cacc[at as usize];
+            c[0] += wt * num;
+            c[1] += wt * den;
         }
     }
 }
 
-/// An observation kept by the fused iteration for its C step.
+/// An observation kept by the fused iteration for its C step (24 bytes: a block's kept
+/// observations stay in the core's cache).
 ///
 /// Its weight and whether it is an outlier are those of the V step, with the `V` before the
 /// step: the C step's own (with the new `V`) differ by the step's change, and both are the
 /// same at the solution.
 struct Kept {
-    /// Position of the pixel in the problem's sample.
-    px: u32,
-    /// The frame's index among the views.
-    view: u32,
-    /// The storage indices of the four bilinear taps and the fractions between them.
-    idx: [u32; 4],
-    frac: [f32; 2],
-    /// `U` of the sample, `C` at the position and the observation's weight.
-    obs: f32,
-    cq: f32,
+    /// The storage index of the first bilinear tap (the others follow from it).
+    at: u32,
+    /// The weight times `U` of the sample, times `C` at the position, and the weight.
+    wo: f32,
+    wc: f32,
     w: f32,
+    /// The pixel's position in the job's sums.
+    px: u32,
+    /// The fractions of the position between the taps, in units of 1 / [`FRAC_ONE`].
+    frac: [u16; 2],
 }
 
-/// The samples of a frame kept in memory by the frame source.
+/// The unit of [`Kept::frac`]: fractions of a cell to 1 / 65536 (a hundred-thousandth of a
+/// pixel on the plane; the bilinear weights of the C step to 2e-5).
+const FRAC_ONE: f64 = 65535.0;
+
+/// A frame with a plane pose as the passes over the store see it: its number and what the
+/// passes need of it.
+struct View {
+    i: usize,
+    geom: Geom,
+}
+
+/// The samples of every frame with a plane pose in the visiting order of a problem, block
+/// by block ([`Problem::blocks`]) and in a block frame by frame: a pass over a block reads
+/// them in a row. Built when they fit in [`VignetteOptions::memory_mb`]; else every pass
+/// decodes the frames again.
+struct Store {
+    views: Vec<View>,
+    /// Frames the layout has room for (every frame of the source: those without a pose
+    /// leave their room empty).
+    room: usize,
+    data: StoreData,
+}
+
+enum StoreData {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+}
+
+/// The samples of one block of one frame.
 #[derive(Clone, Copy)]
 enum SamplesRef<'a> {
     U8(&'a [u8]),
     U16(&'a [u16]),
 }
 
-/// A frame as the fused iteration sees it: its number, what the passes need of it and its
-/// samples, borrowed.
-struct View<'a> {
-    i: usize,
-    geom: Geom,
-    samples: SamplesRef<'a>,
-}
-
-/// What a job of [`fused_iteration`] hands back: its pixels' positions, their V step's sums
-/// and the C step's numerator and denominator per cell.
-type FusedJob = (std::ops::Range<usize>, VSums, Vec<[f32; 2]>);
-
-/// The frames with a plane pose as [`fused_iteration`] sees them, if the source keeps every
-/// frame's samples in memory.
-fn in_memory_views<'a>(p: &Problem<'a>) -> Result<Option<Vec<View<'a>>>, PhotometricError> {
-    let mut views = Vec::with_capacity(p.frames.len());
-    for i in 0..p.frames.len() {
-        let Some(image) = p.frames.samples_in_memory(i) else {
-            return Ok(None);
-        };
-        // (checks the frame)
-        let Some(pf) = p.prepare(i)? else {
-            continue;
-        };
-        if image.size() != (p.size.width, p.size.height) || image.bits() != pf.bits {
-            return Ok(None);
+impl Store {
+    /// An empty store for the frames of `p` with `bits`-bit samples, if it fits in `budget`
+    /// bytes.
+    fn new(p: &Problem<'_>, bits: u32, budget: usize) -> Option<Store> {
+        let room = p.frames.len();
+        let n = room.checked_mul(p.order.len())?;
+        let wide = bits > 8;
+        if n.checked_mul(if wide { 2 } else { 1 })? > budget {
+            return None;
         }
-        let samples = match image {
-            PlaneImage::U8(im) => SamplesRef::U8(im.data()),
-            PlaneImage::U16 { image, .. } => SamplesRef::U16(image.data()),
-        };
-        views.push(View {
-            i,
-            geom: pf.geom,
-            samples,
-        });
+        Some(Store {
+            views: Vec::with_capacity(room),
+            room,
+            data: if wide {
+                StoreData::U16(vec![0; n])
+            } else {
+                StoreData::U8(vec![0; n])
+            },
+        })
     }
-    Ok(Some(views))
+
+    /// Where the samples of view `v` of `block` start.
+    fn at(&self, block: &std::ops::Range<usize>, v: usize) -> usize {
+        block.start * self.room + v * block.len()
+    }
+
+    /// The samples of view `v` of `block`.
+    fn block(&self, block: &std::ops::Range<usize>, v: usize) -> SamplesRef<'_> {
+        let a = self.at(block, v);
+        match &self.data {
+            StoreData::U8(d) => SamplesRef::U8(&d[a..a + block.len()]),
+            StoreData::U16(d) => SamplesRef::U16(&d[a..a + block.len()]),
+        }
+    }
+
+    /// Adds the prepared frames `frames` (frame index, samples, and their geometry on this
+    /// store's problem `p`) as the next views.
+    fn add(&mut self, p: &Problem<'_>, frames: &[(usize, &Samples, Geom)]) {
+        let (first, room) = (self.views.len(), self.room);
+        match &mut self.data {
+            StoreData::U8(d) => fill_blocks(d, p, room, first, frames, |v| v as u8),
+            StoreData::U16(d) => fill_blocks(d, p, room, first, frames, |v| v),
+        }
+        self.views
+            .extend(frames.iter().map(|&(i, _, geom)| View { i, geom }));
+    }
 }
 
-/// Side of the image tiles in which the passes visit the pixels: a tile's footprint on the
-/// plane is compact in every frame, so that the loads of `C` and the sums of the C step stay
-/// in the core's cache (rows of pixels walk across many cache lines of the plane grid).
-const TILE: usize = 16;
+/// Writes the samples of `frames` into the store `data` of problem `p` (room for `room`
+/// frames) as views `first ..`: the blocks own disjoint parts of the data, filled in
+/// parallel.
+fn fill_blocks<T: Copy + Send>(
+    data: &mut [T],
+    p: &Problem<'_>,
+    room: usize,
+    first: usize,
+    frames: &[(usize, &Samples, Geom)],
+    conv: impl Fn(u16) -> T + Sync,
+) {
+    let mut parts = Vec::with_capacity(p.blocks.len());
+    let mut rest = data;
+    for b in &p.blocks {
+        let (head, tail) = rest.split_at_mut(b.len() * room);
+        parts.push((b, head));
+        rest = tail;
+    }
+    parts.into_par_iter().for_each(|(b, part)| {
+        let pix = &p.ordered_pix[b.clone()];
+        for (k, (_, samples, _)) in frames.iter().enumerate() {
+            let v = first + k;
+            let dst = &mut part[v * b.len()..(v + 1) * b.len()];
+            for (d, &q) in dst.iter_mut().zip(pix) {
+                *d = conv(samples.get(q as usize));
+            }
+        }
+    });
+}
+
+/// Frames decoded at a time while the stores are filled.
+const LOAD_CHUNK: usize = 16;
+
+/// The number of connected parts of the observation graph and the part of every 8x8 pixel
+/// block (`u32::MAX`: never observed); see [`Graph`].
+type Parts = (usize, Vec<u32>);
+
+/// One visit of the frames before the iterations: the observation graph's connected parts
+/// (see [`Graph`]) and the stores of `problems` that fit in `budget` bytes together (the
+/// first problems first). Every frame is decoded once.
+fn load(
+    graph_problem: &Problem<'_>,
+    problems: &[&Problem<'_>],
+    budget: usize,
+) -> Result<(Parts, Vec<Option<Store>>), PhotometricError> {
+    let n = graph_problem.frames.len();
+    let bits = graph_problem.u.len().trailing_zeros();
+    let mut left = budget;
+    let mut stores: Vec<Option<Store>> = problems
+        .iter()
+        .map(|p| {
+            let s = Store::new(p, bits, left)?;
+            left -= s.room * p.order.len() * if bits > 8 { 2 } else { 1 };
+            Some(s)
+        })
+        .collect();
+    let mut graph = Graph::new(graph_problem);
+    let indices: Vec<usize> = (0..n).collect();
+    for chunk in indices.chunks(LOAD_CHUNK.max(rayon::current_num_threads())) {
+        let prepared: Vec<(usize, Prepared)> = chunk
+            .par_iter()
+            .map(|&i| Ok(graph_problem.prepare(i)?.map(|pf| (i, pf))))
+            .collect::<Result<Vec<_>, PhotometricError>>()?
+            .into_iter()
+            .flatten()
+            .collect();
+        for (_, pf) in &prepared {
+            graph.add(pf);
+        }
+        for (store, p) in stores.iter_mut().zip(problems) {
+            let Some(store) = store else {
+                continue;
+            };
+            let frames: Vec<(usize, &Samples, Geom)> = prepared
+                .iter()
+                .filter_map(|(i, pf)| {
+                    p.geom(&pf.pose, pf.geom.exposure_ms)
+                        .map(|g| (*i, &pf.samples, g))
+                })
+                .collect();
+            store.add(p, &frames);
+        }
+    }
+    Ok((graph.finish(), stores))
+}
+
+/// Width and height of the image tiles in which the passes visit the pixels: a tile's
+/// footprint on the plane is compact in every frame, so that the loads of `C` and the sums
+/// of the C step stay in the core's cache (a whole row of pixels walks across many cache
+/// lines of the plane grid), and a tile's rows are whole cache lines of the frames' samples
+/// (64x4 is a third faster than 16x16 tiles, whose rows use a quarter of each line).
+const TILE_W: usize = 64;
+const TILE_H: usize = 4;
 
 /// Parallel jobs of the fused iteration (consecutive bands of tiles share their
 /// accumulators).
 const PIXEL_JOBS: usize = 16;
 
 /// The positions of `sample` (pixel indices of an image `width` wide) in the order of the
-/// image's tiles of [`TILE`] pixels (tiles row by row, pixels row by row in a tile).
+/// image's tiles of [`TILE_W`] x [`TILE_H`] pixels (tiles row by row, pixels row by row in
+/// a tile).
 fn tile_order(sample: &[u32], width: usize) -> Vec<u32> {
     let mut order: Vec<u32> = (0..sample.len() as u32).collect();
     order.sort_by_key(|&q| {
         let pix = sample[q as usize] as usize;
         let (x, y) = (pix % width, pix / width);
-        (y / TILE, x / TILE, q)
+        (y / TILE_H, x / TILE_W, q)
     });
     order
 }
@@ -1022,113 +1251,183 @@ fn ordered(rays: &[[f32; 3]], sample: &[u32], order: &[u32]) -> ([Vec<f32>; 3], 
     ([axis(0), axis(1), axis(2)], pix)
 }
 
-/// The jobs of [`fused_iteration`]: ranges of the problem's `order` made of whole bands of
-/// tiles (so that a job's pixels are a range of positions), [`PIXEL_JOBS`] of them.
-fn band_jobs(p: &Problem<'_>) -> Vec<std::ops::Range<usize>> {
-    let w = p.size.width;
-    let band = |k: usize| p.sample[p.order[k] as usize] as usize / w / TILE;
+/// The blocks and jobs of a problem whose visiting order has the pixels `ordered_pix` (see
+/// [`Problem::blocks`]).
+fn blocks_and_jobs(
+    ordered_pix: &[u32],
+    width: usize,
+) -> (Vec<std::ops::Range<usize>>, Vec<std::ops::Range<usize>>) {
+    let band = |k: usize| ordered_pix[k] as usize / width / TILE_H;
     // where each band starts in the order
-    let mut starts: Vec<usize> = (0..p.order.len())
+    let mut starts: Vec<usize> = (0..ordered_pix.len())
         .filter(|&k| k == 0 || band(k) != band(k - 1))
         .collect();
-    starts.push(p.order.len());
+    starts.push(ordered_pix.len());
     let bands = starts.len() - 1;
     let per = bands.div_ceil(PIXEL_JOBS).max(1);
-    (0..bands)
-        .step_by(per)
-        .map(|b| starts[b]..starts[(b + per).min(bands)])
-        .collect()
+    let mut blocks = Vec::new();
+    let mut jobs = Vec::new();
+    for first in (0..bands).step_by(per) {
+        let from = blocks.len();
+        for b in first..(first + per).min(bands) {
+            let (s, e) = (starts[b], starts[b + 1]);
+            blocks.extend((s..e).step_by(BATCH).map(|k| k..(k + BATCH).min(e)));
+        }
+        jobs.push(from..blocks.len());
+    }
+    (blocks, jobs)
 }
 
-/// One iteration's V step and C step in one visit of the data, when every frame is in
-/// memory: the pixels in blocks, each block over all frames; the block's V step is exact
-/// (all its observations are there), and its observations, kept, give their share of the
-/// C step with the block's new `V`. The sums of a V pass followed by a C pass with the new
-/// `V`, at the cost of one pass, but for two things: the C step weighs the observations and
-/// drops outliers as the V step did (the same at the solution; see [`Kept`]), and it is done
-/// with the V step's `V` before the gauge is fixed (the same `C` up to the gauge's scale:
-/// `C` comes back unscaled).
-fn fused_iteration(
+/// What a pass over the store computes.
+#[derive(Clone, Copy, PartialEq)]
+enum Visit {
+    /// The V step's sums.
+    V,
+    /// The C step's sums with `V` as it is.
+    C,
+    /// One iteration's V step and C step in one visit of the data: the pixels in blocks,
+    /// each block over all frames; the block's V step is exact (all its observations are
+    /// there), and its observations, kept, give their share of the C step with the block's
+    /// new `V`. The sums of a V pass followed by a C pass with the new `V`, at the cost of
+    /// one pass, but for two things: the C step weighs the observations and drops outliers
+    /// as the V step did (the same at the solution; see [`Kept`]), and it is done with the
+    /// V step's `V` before the gauge is fixed (the same `C` up to the gauge's scale: `C`
+    /// comes back unscaled).
+    Fused,
+}
+
+/// What a job of [`store_pass`] hands back: its pixels' positions, their V step's sums and
+/// the C step's numerator and denominator per cell.
+type StoreJob = (std::ops::Range<usize>, VSums, Vec<[f32; 2]>);
+
+/// Adds a job's C step sums to the totals.
+fn add_cells(num: &mut [f64], den: &mut [f64], cacc: &[[f32; 2]]) {
+    for ((n, d), c) in num.iter_mut().zip(den.iter_mut()).zip(cacc) {
+        *n += c[0] as f64;
+        *d += c[1] as f64;
+    }
+}
+
+/// A pass over the frames in `store` (see [`Visit`]): the V step's sums (with the
+/// statistics when `stats`), and the new `C` of the C step (`model.c` for [`Visit::V`]).
+fn store_pass(
     p: &Problem<'_>,
     model: &Model,
     tables: &Tables,
-    views: &[View<'_>],
+    store: &Store,
+    visit: Visit,
+    stats: bool,
 ) -> Result<(VSums, Vec<f32>), PhotometricError> {
-    let npx = p.sample.len();
     let ncell = cells(p.grid);
     let levels = p.u.len();
-    let ctx = PassCtx::new(p, model, tables, Step::V);
-    let jobs = band_jobs(p);
+    let step = if visit == Visit::C { Step::C } else { Step::V };
+    let ctx = PassCtx::new(p, model, tables, step, stats);
+    let views = &store.views;
+    let (npx, cells_needed) = match visit {
+        Visit::V => (p.sample.len(), 0),
+        Visit::C => (0, ncell),
+        Visit::Fused => (p.sample.len(), ncell),
+    };
     let mut total = VSums::new(npx, levels);
-    let mut num_total = vec![0.0f64; ncell];
-    let mut den_total = vec![0.0f64; ncell];
+    let mut num_total = vec![0.0f64; cells_needed];
+    let mut den_total = vec![0.0f64; cells_needed];
     fold_frame_jobs(
-        &jobs,
-        |job| -> Result<FusedJob, PhotometricError> {
-            let order = &p.order[job.clone()];
+        &p.jobs,
+        |job| -> Result<StoreJob, PhotometricError> {
+            let blocks = &p.blocks[job];
+            let range = blocks.first().map_or(0, |b| b.start)..blocks.last().map_or(0, |b| b.end);
+            let order = &p.order[range.clone()];
             // the positions of the job's pixels (whole bands: a range)
             let start = order.iter().min().map_or(0, |&q| q as usize);
             let end = order.iter().max().map_or(0, |&q| q as usize + 1);
-            let mut acc = VSums::new(end - start, levels);
-            // the C step's numerator and denominator per cell, side by side (one cache line)
-            let mut cacc = vec![[0.0f32; 2]; ncell];
-            let mut new_v = vec![0.0f64; end - start];
+            let mut acc = JobSums {
+                v: VSums::new(if npx > 0 { end - start } else { 0 }, levels),
+                cacc: vec![[0.0f32; 2]; cells_needed],
+            };
+            let mut new_v = vec![
+                0.0f64;
+                if visit == Visit::Fused {
+                    end - start
+                } else {
+                    0
+                }
+            ];
             let mut batch = Batch::new();
-            let mut kept = Vec::new();
-            for first in job.clone().step_by(BATCH) {
-                let block = first..(first + BATCH).min(job.end);
+            let mut kept: Vec<Kept> = Vec::new();
+            // where each view's kept observations end, and its exposure
+            let mut groups: Vec<(usize, f64)> = Vec::with_capacity(views.len());
+            let mut view_order: Vec<(u64, u32)> = Vec::with_capacity(views.len());
+            for block in blocks {
                 kept.clear();
-                for (vi, view) in views.iter().enumerate() {
-                    let keep = Some((&mut kept, vi as u32));
-                    match view.samples {
-                        SamplesRef::U8(d) => ctx.stages(&view.geom, d, block.clone(), &mut batch),
-                        SamplesRef::U16(d) => ctx.stages(&view.geom, d, block.clone(), &mut batch),
+                groups.clear();
+                // the views in the order of where the block lands on the plane (a Morton
+                // order of its first pixel's cell tile): neighbouring views gather and splat
+                // on neighbouring cells
+                let ray = p.rays[p.ordered_pix[block.start] as usize];
+                view_order.clear();
+                view_order.extend(views.iter().enumerate().map(|(vi, v)| {
+                    let key = grid_coords(ray, &v.geom.m, p.grid)
+                        .map_or(u64::MAX, |g| morton(g[0] as u32 >> 3, g[1] as u32 >> 3));
+                    (key, vi as u32)
+                }));
+                view_order.sort_unstable();
+                for &(_, vi) in &view_order {
+                    let view = &views[vi as usize];
+                    match store.block(block, vi as usize) {
+                        SamplesRef::U8(d) => {
+                            ctx.stages(&view.geom, InBlock(d), block.clone(), &mut batch)
+                        }
+                        SamplesRef::U16(d) => {
+                            ctx.stages(&view.geom, InBlock(d), block.clone(), &mut batch)
+                        }
                     }
-                    ctx.v_sums(view.i, &view.geom, &batch, &mut acc, start, keep);
+                    let keep = (visit == Visit::Fused).then_some(&mut kept);
+                    match visit {
+                        Visit::C => ctx.c_sums(&view.geom, &batch, &mut acc),
+                        _ if stats => {
+                            ctx.v_sums::<true>(view.i, &view.geom, &batch, &mut acc.v, start, keep)
+                        }
+                        _ => {
+                            ctx.v_sums::<false>(view.i, &view.geom, &batch, &mut acc.v, start, keep)
+                        }
+                    }
+                    groups.push((kept.len(), view.geom.exposure_ms));
+                }
+                if visit != Visit::Fused {
+                    continue;
                 }
                 // the block's new V (unscaled), and its observations' share of the C step
-                for &q in &p.order[block] {
+                for &q in &p.order[block.clone()] {
                     let (px, a) = (q as usize, q as usize - start);
-                    new_v[a] = if acc.den[a] > 0.0 {
-                        acc.num[a] / acc.den[a]
+                    new_v[a] = if acc.v.den[a] > 0.0 {
+                        acc.v.num[a] / acc.v.den[a]
                     } else {
                         model.v[px]
                     };
                 }
-                for o in &kept {
-                    let tv = views[o.view as usize].geom.exposure_ms * new_v[o.px as usize - start];
-                    // (a NaN V fails too)
-                    if tv.is_nan() || tv <= 0.0 {
-                        continue;
-                    }
-                    let (w, cq) = (o.w as f64, o.cq as f64);
-                    let r = o.obs as f64 - tv * cq;
-                    let (num, den) = ((w * tv * r) as f32, (w * tv * tv) as f32);
-                    let [fx, fy] = o.frac;
-                    let wt = [
-                        (1.0 - fx) * (1.0 - fy),
-                        fx * (1.0 - fy),
-                        (1.0 - fx) * fy,
-                        fx * fy,
-                    ];
-                    for (&at, wt) in o.idx.iter().zip(wt) {
-                        let c = &mut cacc[at as usize];
-                        c[0] += wt * num;
-                        c[1] += wt * den;
-                    }
+                let mut from = 0;
+                for &(to, t) in &groups {
+                    ctx.splat_kept(&kept[from..to], t, &new_v, &mut acc.cacc);
+                    from = to;
                 }
             }
-            Ok((start..end, acc, cacc))
+            Ok((start..end, acc.v, acc.cacc))
         },
-        |(range, acc, cacc)| {
-            total.add_range(&acc, range.start);
-            for ((n, d), c) in num_total.iter_mut().zip(den_total.iter_mut()).zip(&cacc) {
-                *n += c[0] as f64;
-                *d += c[1] as f64;
+        |(range, vs, cacc)| {
+            if npx > 0 {
+                total.add_range(&vs, range.start);
+            } else {
+                total.add_statistics(&vs);
             }
+            add_cells(&mut num_total, &mut den_total, &cacc);
         },
     )?;
-    Ok((total, c_step(&model.c, &num_total, &den_total)))
+    let c = if cells_needed > 0 {
+        c_step(&model.c, &num_total, &den_total)
+    } else {
+        model.c.clone()
+    };
+    Ok((total, c))
 }
 
 /// The C step's new `C` from its sums per cell: `c + num / den` where a cell has any,
@@ -1156,10 +1455,11 @@ fn pass(
     model: &Model,
     tables: &Tables,
     step: Step,
+    stats: bool,
 ) -> Result<(VSums, Vec<f32>), PhotometricError> {
     let ncell = cells(p.grid);
     let u = p.u;
-    let ctx = PassCtx::new(p, model, tables, step);
+    let ctx = PassCtx::new(p, model, tables, step, stats);
     let (npx, cells_needed) = match step {
         Step::V => (p.sample.len(), 0),
         Step::C => (0, ncell),
@@ -1180,8 +1480,7 @@ fn pass(
             }
             let mut acc = JobSums {
                 v: VSums::new(npx, u.len()),
-                cnum: vec![0.0f32; cells_needed],
-                cden: vec![0.0f32; cells_needed],
+                cacc: vec![[0.0f32; 2]; cells_needed],
             };
             let mut batch = Batch::new();
             for start in (0..p.order.len()).step_by(PIXEL_BLOCK) {
@@ -1201,26 +1500,34 @@ fn pass(
         },
         |acc| {
             total.add(&acc.v);
-            for (t, v) in num_total.iter_mut().zip(&acc.cnum) {
-                *t += *v as f64;
-            }
-            for (t, v) in den_total.iter_mut().zip(&acc.cden) {
-                *t += *v as f64;
-            }
+            add_cells(&mut num_total, &mut den_total, &acc.cacc);
         },
     )?;
     Ok((total, c_step(&model.c, &num_total, &den_total)))
 }
 
-/// Union-find over pixels and plane cells, on 8x8 pixel blocks and 8x8 cell tiles: the
-/// number of connected parts of the observation graph that hold observed pixels.
-fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
-    let (w, h) = (p.size.width, p.size.height);
-    let (bw, bh) = (w.div_ceil(8), h.div_ceil(8));
-    let tiles = p.grid.div_ceil(8);
-    let nodes = bw * bh + tiles * tiles;
-    let mut parent: Vec<u32> = (0..nodes as u32).collect();
-    fn find(parent: &mut [u32], mut a: u32) -> u32 {
+/// Union-find over pixels and plane cells, on 8x8 pixel blocks and 8x8 cell tiles (two
+/// unknowns joined when one observation links them): the connected parts of the
+/// observation graph that hold observed pixels. Frames are added one at a time.
+struct Graph<'p, 'a> {
+    p: &'p Problem<'a>,
+    parent: Vec<u32>,
+    seen: Vec<bool>,
+}
+
+impl<'p, 'a> Graph<'p, 'a> {
+    fn new(p: &'p Problem<'a>) -> Self {
+        let (bw, bh) = (p.size.width.div_ceil(8), p.size.height.div_ceil(8));
+        let tiles = p.grid.div_ceil(8);
+        Graph {
+            p,
+            parent: (0..(bw * bh + tiles * tiles) as u32).collect(),
+            seen: vec![false; bw * bh],
+        }
+    }
+
+    fn find(&mut self, mut a: u32) -> u32 {
+        let parent = &mut self.parent;
         while parent[a as usize] != a {
             let up = parent[parent[a as usize] as usize];
             parent[a as usize] = up;
@@ -1228,11 +1535,13 @@ fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
         }
         a
     }
-    let mut seen = vec![false; bw * bh];
-    for i in 0..p.frames.len() {
-        let Some(pf) = p.prepare(i)? else {
-            continue;
-        };
+
+    /// Joins what the frame `pf` (prepared on the graph's problem) observes.
+    fn add(&mut self, pf: &Prepared) {
+        let p = self.p;
+        let (w, h) = (p.size.width, p.size.height);
+        let (bw, bh) = (w.div_ceil(8), h.div_ceil(8));
+        let tiles = p.grid.div_ceil(8);
         for by in 0..bh {
             for bx in 0..bw {
                 let (x, y) = ((bx * 8 + 4).min(w - 1), (by * 8 + 4).min(h - 1));
@@ -1243,25 +1552,28 @@ fn components(p: &Problem<'_>) -> Result<(usize, Vec<u32>), PhotometricError> {
                 if let Some(g) = grid_coords(p.rays[px], &pf.geom.m, p.grid) {
                     let cnode = (bw * bh + (g[1] as usize / 8) * tiles + g[0] as usize / 8) as u32;
                     let pnode = (by * bw + bx) as u32;
-                    seen[by * bw + bx] = true;
-                    let (ra, rb) = (find(&mut parent, pnode), find(&mut parent, cnode));
+                    self.seen[by * bw + bx] = true;
+                    let (ra, rb) = (self.find(pnode), self.find(cnode));
                     if ra != rb {
-                        parent[ra as usize] = rb;
+                        self.parent[ra as usize] = rb;
                     }
                 }
             }
         }
     }
-    let mut roots = std::collections::BTreeMap::new();
-    let mut label = vec![u32::MAX; bw * bh];
-    for b in 0..bw * bh {
-        if seen[b] {
-            let r = find(&mut parent, b as u32);
+
+    /// The connected parts.
+    fn finish(mut self) -> Parts {
+        let mut roots = std::collections::BTreeMap::new();
+        let mut label = vec![u32::MAX; self.seen.len()];
+        let seen = std::mem::take(&mut self.seen);
+        for (b, _) in seen.iter().enumerate().filter(|(_, s)| **s) {
+            let r = self.find(b as u32);
             let n = roots.len() as u32;
             label[b] = *roots.entry(r).or_insert(n);
         }
+        (roots.len(), label)
     }
-    Ok((roots.len(), label))
 }
 
 /// The coarse stage has every `COARSE_STRIDE`-th pixel in each direction and a grid as
@@ -1410,16 +1722,36 @@ pub fn calibrate_vignette(
         _ => return Err(PhotometricError::BitDepth(bits)),
     };
     let u = &table[..];
+    // coarse to fine: the alternation creeps along smooth trades between V and C, which a
+    // problem on every 4th pixel in each direction and a 4x coarser grid resolves at a
+    // sixteenth of the cost; its V starts the full problem
+    let stride = COARSE_STRIDE;
+    let coarse_ok = w >= 16 * stride && h >= 16 * stride && grid >= 64;
+    let (cw, ch) = (w.div_ceil(stride), h.div_ceil(stride));
+    let coarse = coarse_ok.then(|| {
+        let sample: Vec<u32> = (0..ch)
+            .flat_map(|y| {
+                (0..cw).map(move |x| {
+                    let (px, py) = (
+                        (x * stride + stride / 2).min(w - 1),
+                        (y * stride + stride / 2).min(h - 1),
+                    );
+                    (py * w + px) as u32
+                })
+            })
+            .collect();
+        Problem::new(frames, &rays, sample, size, u, options, grid / stride)
+    });
+    let all = (0..npx as u32).collect();
+    let problem = Problem::new(frames, &rays, all, size, u, options, grid);
+    // one visit of the frames: the observation graph, and the frames in memory for the
+    // iterations where they fit (the coarse stage's first)
+    let stages: Vec<&Problem<'_>> = coarse.iter().chain([&problem]).collect();
+    let ((parts, labels), mut stores) =
+        load(&problem, &stages, options.memory_mb.saturating_mul(1 << 20))?;
+    let store = stores.pop().flatten();
+    let coarse_store = stores.pop().flatten();
     // observability: one connected part, image corners covered
-    let (parts, labels) = components(&Problem::new(
-        frames,
-        &rays,
-        Vec::new(),
-        size,
-        u,
-        options,
-        grid,
-    ))?;
     if parts == 0 {
         return Err(PhotometricError::Calibration(
             "no pixel of any frame sees the calibration plane".into(),
@@ -1460,29 +1792,12 @@ pub fn calibrate_vignette(
             100.0 * (1.0 - frac)
         ));
     }
-    // coarse to fine: the alternation creeps along smooth trades between V and C, which a
-    // problem on every 4th pixel in each direction and a 4x coarser grid resolves at a
-    // sixteenth of the cost; its V starts the full problem
-    let stride = COARSE_STRIDE;
-    let coarse_ok = w >= 16 * stride && h >= 16 * stride && grid >= 64;
     let mut warm: Option<(Vec<f64>, NoiseModel)> = None;
     let mut coarse_iterations = 0;
-    if coarse_ok {
-        let (cw, ch) = (w.div_ceil(stride), h.div_ceil(stride));
-        let sample: Vec<u32> = (0..ch)
-            .flat_map(|y| {
-                (0..cw).map(move |x| {
-                    let (px, py) = (
-                        (x * stride + stride / 2).min(w - 1),
-                        (y * stride + stride / 2).min(h - 1),
-                    );
-                    (py * w + px) as u32
-                })
-            })
-            .collect();
-        let coarse = Problem::new(frames, &rays, sample, size, u, options, grid / stride);
+    if let Some(coarse) = &coarse {
         let stage = solve(
-            &coarse,
+            coarse,
+            coarse_store.as_ref(),
             None,
             (COARSE_TOLERANCE, 0.0),
             options.max_iterations,
@@ -1507,10 +1822,10 @@ pub fn calibrate_vignette(
             .collect();
         warm = Some((full_v, stage.model.noise));
     }
-    let all = (0..npx as u32).collect();
-    let problem = Problem::new(frames, &rays, all, size, u, options, grid);
+    drop(coarse_store);
     let stage = solve(
         &problem,
+        store.as_ref(),
         warm,
         (options.tolerance, options.noise_tolerance),
         options.max_iterations,
@@ -1525,7 +1840,11 @@ pub fn calibrate_vignette(
     } = stage;
     let iterations = iterations + coarse_iterations;
     // the final statistics with the final V and C
-    let vs = pass(&problem, &model, &tables, Step::V)?.0;
+    let vs = match &store {
+        Some(st) => store_pass(&problem, &model, &tables, st, Visit::V, true)?.0,
+        None => pass(&problem, &model, &tables, Step::V, true)?.0,
+    };
+    drop(store);
     finish(
         &problem,
         model,
@@ -1566,6 +1885,7 @@ struct Stage {
 /// start (`V` and the noise model of a coarser stage) both are fixed from the start.
 fn solve(
     problem: &Problem<'_>,
+    store: Option<&Store>,
     warm: Option<(Vec<f64>, NoiseModel)>,
     (tolerance, noise_tolerance): (f64, f64),
     max_iterations: usize,
@@ -1594,9 +1914,11 @@ fn solve(
     let mut tables = Tables::new(u, &model.noise);
     // (without outlier rejection: with C = 0 every observation would be one)
     model.reject = false;
-    model.c = pass(problem, &model, &tables, Step::C)?.1;
+    model.c = match store {
+        Some(st) => store_pass(problem, &model, &tables, st, Visit::C, false)?.1,
+        None => pass(problem, &model, &tables, Step::C, false)?.1,
+    };
     model.reject = warm_start;
-    let views = in_memory_views(problem)?;
     let mut anderson = Anderson::new(ANDERSON_MEMORY);
     let mut change = Vec::new();
     let mut converged = false;
@@ -1608,13 +1930,15 @@ fn solve(
     const NOISE_FIT_ITERATIONS: usize = 7;
     for it in 0..max_iterations.max(1) {
         iterations = it + 1;
+        // the statistics of the residuals while the noise model follows them
+        let stats = !warm_start && it < NOISE_FIT_ITERATIONS;
         // V step with the current C (and, all frames at hand, the C step with its V)
-        let (vs, fused_c) = match &views {
-            Some(views) => {
-                let (vs, c) = fused_iteration(problem, &model, &tables, views)?;
+        let (vs, fused_c) = match store {
+            Some(st) => {
+                let (vs, c) = store_pass(problem, &model, &tables, st, Visit::Fused, stats)?;
                 (vs, Some(c))
             }
-            None => (pass(problem, &model, &tables, Step::V)?.0, None),
+            None => (pass(problem, &model, &tables, Step::V, stats)?.0, None),
         };
         if vs.nobs == 0 {
             return Err(PhotometricError::Calibration(
@@ -1639,7 +1963,7 @@ fn solve(
         }
         // C step (a Jacobi step towards the exact least squares) with the new V
         let old_v = std::mem::replace(&mut model.v, gv);
-        let gc = match fused_c {
+        let gc: Vec<f32> = match fused_c {
             // the C step with the unscaled V: C on the gauge's scale
             Some(c) => c.iter().map(|&c| c * mean as f32).collect(),
             None => {
@@ -1649,7 +1973,7 @@ fn solve(
                     noise: model.noise,
                     reject: model.reject,
                 };
-                pass(problem, &scaled, &tables, Step::C)?.1
+                pass(problem, &scaled, &tables, Step::C, false)?.1
             }
         };
         // Anderson mixing of the whole iteration (V and C together)

@@ -9,7 +9,6 @@ use std::path::{Path, PathBuf};
 
 use camera_model::Image;
 use dataset_io::Sequence;
-use rayon::prelude::*;
 
 use crate::figures::{self, Chart, Corner, Figure, Panel, Series, PALETTE};
 use crate::{Observer, PipelineError, Result, WithContext};
@@ -300,14 +299,13 @@ pub fn response_figure(
     Ok(figures::save(&fig, path)?)
 }
 
-/// Frames of a sequence with poses: decoded once and kept when they fit in
-/// [`DECODED_CACHE_BYTES`], else decoded again on every pass (memory stays flat). 16-bit
+/// Frames of a sequence with poses, decoded when the calibration asks (it keeps what it
+/// needs in memory when that fits its `memory_mb`, else asks again on every pass). 16-bit
 /// frames are `bits`-bit samples after a right shift by `shift` (see [`deep_layout`]).
 struct SequencePlaneFrames<'a> {
     seq: &'a Sequence,
     frames: Vec<(usize, f64, photometric::PlanePose)>,
     deep: Option<DeepLayout>,
-    decoded: Vec<photometric::PlaneImage>,
 }
 
 /// The bit depth of the samples of a 16-bit sequence and the shift that brings them to the
@@ -350,9 +348,6 @@ impl DeepLayout {
     }
 }
 
-/// Largest total size of decoded frames kept in memory by `calib vignette`.
-const DECODED_CACHE_BYTES: usize = 192 << 20;
-
 impl SequencePlaneFrames<'_> {
     fn decode(&self, k: usize) -> Result<photometric::PlaneImage> {
         Ok(match self.deep {
@@ -368,20 +363,14 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
     }
     fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, photometric::PhotometricError> {
         let (k, exposure_ms, pose) = self.frames[i];
-        let image = match self.decoded.get(i) {
-            Some(img) => img.clone(),
-            None => self
-                .decode(k)
-                .map_err(|e| photometric::PhotometricError::Calibration(crate::error_chain(&e)))?,
-        };
+        let image = self
+            .decode(k)
+            .map_err(|e| photometric::PhotometricError::Calibration(crate::error_chain(&e)))?;
         Ok(photometric::PlaneFrame {
             image,
             exposure_ms,
             pose,
         })
-    }
-    fn samples_in_memory(&self, i: usize) -> Option<&photometric::PlaneImage> {
-        self.decoded.get(i)
     }
 }
 
@@ -703,7 +692,8 @@ impl VignetteRun {
 }
 
 /// Poses (from the marker or the poses file) and the calibration, without writing anything:
-/// the frames are decoded once and kept when they fit in 192 MiB, else decoded on every pass.
+/// the calibration keeps the frames in memory when they fit in its `memory_mb` (160 MiB by
+/// default), else decodes them on every pass.
 /// Progress goes to `observer` (stages as `begin`/`advance`, iterations as `status`).
 pub fn calibrate_vignette_sequence(
     job: &VignetteJob,
@@ -769,34 +759,11 @@ pub fn calibrate_vignette_sequence(
             if a.poses.is_some() { ", or the ids in the poses file" } else { "" }
         )));
     }
-    let sample_bytes = if deep.is_some() { 2 } else { 1 };
-    let bytes = frames.len() * cam.input_size.pixels() * sample_bytes;
-    let mut source = SequencePlaneFrames {
+    let source = SequencePlaneFrames {
         seq: &seq,
         frames,
         deep,
-        decoded: Vec::new(),
     };
-    if bytes <= DECODED_CACHE_BYTES {
-        let idx: Vec<usize> = source.frames.iter().map(|f| f.0).collect();
-        let mut out = Vec::with_capacity(idx.len());
-        observer.begin(idx.len() as u64, "decoding", "frames");
-        for part in idx.chunks(rayon::current_num_threads() * 4) {
-            let images: Vec<Result<photometric::PlaneImage>> = part
-                .par_iter()
-                .map(|&k| {
-                    let r = source.decode(k);
-                    observer.advance(1);
-                    r
-                })
-                .collect();
-            for image in images {
-                out.push(image?);
-            }
-        }
-        observer.finish();
-        source.decoded = out;
-    }
     observer.status("calibrating");
     let cal = photometric::calibrate_vignette(
         &cam.input,
