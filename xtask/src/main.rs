@@ -48,7 +48,8 @@ fn usage() -> &'static str {
      cargo xtask fuzz [--cases N] [--quick] [--seed S] [--target NAME] (see fuzz --help)\n\n\
      bench-synthetic runs every stage on synthetic data, prints accuracy, speed and memory, and\n\
      fails when a figure is worse than xtask/thresholds.json. --quick is the CI variant\n\
-     (smaller data); --only runs one stage: camera, eval, rectify, response or vignette.\n\
+     (smaller data, no demo stage); --only runs one stage: camera, eval, rectify, response,\n\
+     vignette or demo (monovo demo from start to end).\n\
      fuzz feeds every parser arbitrary and mutated bytes and fails on a panic."
 }
 

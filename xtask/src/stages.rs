@@ -42,12 +42,13 @@ pub fn median_ms(n: usize, mut f: impl FnMut()) -> f64 {
 /// Runs every stage.
 pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
     type Stage = fn(bool) -> Result<Vec<Figure>>;
-    let stages: [(&str, Stage); 5] = [
+    let stages: [(&str, Stage); 6] = [
         ("camera", camera),
         ("eval", eval),
         ("rectify", rectify),
         ("response", crate::response::stage),
         ("vignette", crate::vignette::stage),
+        ("demo", demo),
     ];
     if let Some(o) = only {
         if !stages.iter().any(|(n, _)| *n == o) {
@@ -64,6 +65,36 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
 }
 
 const DATASET_CAMERA: &str = "0.535719308086809 0.669566858850269 0.493248545285398 0.500408664348414 0.897966326944875\n1280 1024\ncrop\n640 480\n";
+
+/// Demo stage (full runs and `--only demo`; the CI runs the demo itself after the quick
+/// benchmark): the README's main job, `monovo demo`, as a user runs it, from start to end,
+/// with the release binary built first.
+fn demo(quick: bool) -> Result<Vec<Figure>> {
+    if quick {
+        return Ok(Vec::new());
+    }
+    println!("stage demo: monovo demo, release build, from start to end");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .ok_or_else(|| anyhow::anyhow!("the workspace root"))?;
+    let built = std::process::Command::new(env!("CARGO"))
+        .args(["build", "--release", "--locked", "-p", "monovo"])
+        .current_dir(root)
+        .status()?;
+    anyhow::ensure!(built.success(), "cargo build -p monovo failed");
+    let out = std::env::temp_dir().join(format!("monovo-bench-demo-{}", std::process::id()));
+    let t0 = Instant::now();
+    let ran = std::process::Command::new(root.join("target/release/monovo"))
+        .args(["demo", "--force", "-o"])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let _ = std::fs::remove_dir_all(&out);
+    anyhow::ensure!(ran.success(), "monovo demo failed");
+    println!("  {seconds:.1} s");
+    Ok(vec![Figure::lower("demo.seconds", seconds, "s")])
+}
 
 /// Camera stage: output K against DESIGN.md's reference numbers, map build and remap speed.
 fn camera(quick: bool) -> Result<Vec<Figure>> {
