@@ -304,30 +304,23 @@ fn grid_coords(ray: [f32; 3], m: &[[f64; 3]; 3], grid: usize) -> Option<[f64; 2]
     (gx >= 0.0 && gy >= 0.0 && gx <= g && gy <= g).then_some([gx, gy])
 }
 
-/// Storage index of grid cell `(x, y)`: 8x8 tiles, so that the oblique walks of projected
-/// image rows over the plane stay in cache.
+/// Storage index of grid cell `(x, y)`: row by row (the passes visit the pixels in small
+/// tiles whose footprint on the plane is a few rows of cells).
 #[inline]
 fn cell(x: usize, y: usize, grid: usize) -> usize {
-    let tiles_x = grid.div_ceil(8);
-    (((y >> 3) * tiles_x + (x >> 3)) << 6) + ((y & 7) << 3) + (x & 7)
+    y * grid + x
 }
 
-/// Number of stored cells of a `grid x grid` plane (tiles padded to 8).
+/// Number of stored cells of a `grid x grid` plane.
 fn cells(grid: usize) -> usize {
-    grid.div_ceil(8) * grid.div_ceil(8) * 64
+    grid * grid
 }
 
 /// The storage indices of the four bilinear taps whose first is `at` (see [`cell`]): the
-/// neighbours in x and in y, across tile borders where `at` ends a tile's row or column.
+/// neighbours in x, in y and in both.
 #[inline]
-fn taps(at: usize, tiles_x: usize) -> [usize; 4] {
-    let dx = if at & 7 == 7 { 57 } else { 1 };
-    let dy = if (at >> 3) & 7 == 7 {
-        tiles_x * 64 - 56
-    } else {
-        8
-    };
-    [at, at + dx, at + dy, at + dy + dx]
+fn taps(at: usize, grid: usize) -> [usize; 4] {
+    [at, at + 1, at + grid, at + grid + 1]
 }
 
 /// The Morton (Z-order) index of `(x, y)`: near cells get near indices.
@@ -576,7 +569,8 @@ const VAR_BINS: usize = 2048;
 /// Per energy bin: the noise model's variance of `U(I)`, the grey value, and the inverse
 /// slope of `U` there (residuals in grey values for the noise model's fit).
 struct Tables {
-    var: Vec<f64>,
+    /// (an array: its length is known where the passes index it)
+    var: Box<[f64; VAR_BINS]>,
     grey: Vec<u16>,
     inv_slope: Vec<f64>,
     scale: f64,
@@ -588,14 +582,14 @@ impl Tables {
         let top = u[last].max(1e-9);
         let scale = (VAR_BINS - 1) as f64 / top;
         let mut t = Tables {
-            var: Vec::with_capacity(VAR_BINS),
+            var: Box::new([0.0; VAR_BINS]),
             grey: Vec::with_capacity(VAR_BINS),
             inv_slope: Vec::with_capacity(VAR_BINS),
             scale,
         };
         for b in 0..VAR_BINS {
             let e = b as f64 / scale;
-            t.var.push(noise.energy_variance(u, e));
+            t.var[b] = noise.energy_variance(u, e);
             let k = u.partition_point(|&x| x <= e).clamp(1, last);
             t.grey.push(k as u16);
             t.inv_slope.push(1.0 / (u[k] - u[k - 1]).max(1e-9));
@@ -603,10 +597,27 @@ impl Tables {
         t
     }
 
+    /// The bin of energy `e` (the nearest; NaN gives bin 0).
     #[inline]
     fn bin(&self, e: f64) -> usize {
-        ((e.max(0.0) * self.scale) as usize).min(VAR_BINS - 1)
+        // (a branch-free conversion: `as usize` saturates in several instructions)
+        let b = (e * self.scale).clamp(0.0, (VAR_BINS - 1) as f64);
+        round_small(if b.is_nan() { 0.0 } else { b }) as usize
     }
+}
+
+/// `x` rounded to the nearest integer (ties to even), for `0 <= x < 2^31`: the low bits of
+/// `x + 2^52` (a branch-free conversion; `as` saturates in several instructions).
+#[inline]
+fn round_small(x: f64) -> u32 {
+    (x + 4_503_599_627_370_496.0).to_bits() as u32
+}
+
+/// The floor of `x`, for `0 <= x < 2^31` (see [`round_small`]).
+#[inline]
+fn floor_small(x: f64) -> i32 {
+    let r = round_small(x) as i32;
+    r - (r as f64 > x) as i32
 }
 
 /// Parallel jobs of a pass over the frames: consecutive frames share their accumulators.
@@ -673,7 +684,6 @@ struct PassCtx<'a, 'p> {
     step: Step,
     /// Whether the V step takes the statistics too (see [`PassCtx::v_sums`]).
     stats: bool,
-    tiles_x: usize,
 }
 
 /// The sums of one job: the V step's per pixel, or the C step's per cell (numerator and
@@ -775,7 +785,6 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             top: p.top(),
             step,
             stats,
-            tiles_x: p.grid.div_ceil(8),
         }
     }
 
@@ -850,7 +859,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
                 let at = cell(x0, y0, grid);
                 b.pos[n] = pos;
                 b.k[n] = k;
-                b.idx[n] = taps(at, self.tiles_x).map(|i| i as u32);
+                b.idx[n] = taps(at, grid).map(|i| i as u32);
                 b.frac[n] = [gx - x0 as f64, gy - y0 as f64];
                 n += 1;
             }
@@ -972,7 +981,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
                 (1.0 - fx) * fy,
                 fx * fy,
             ];
-            for (at, wt) in taps(o.at as usize, self.tiles_x).into_iter().zip(wt) {
+            for (at, wt) in taps(o.at as usize, self.p.grid).into_iter().zip(wt) {
                 let c = &mut cacc[at];
                 c[0] += wt * num;
                 c[1] += wt * den;
@@ -1028,6 +1037,291 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             c[0] += wt * num;
             c[1] += wt * den;
         }
+    }
+}
+
+/// The observations of one block of one frame for the iterations whose noise model is
+/// fixed ([`PassCtx::dense`]), one entry per position of the block: the first bilinear tap,
+/// the fractions between the taps, and what the C step needs (weight times `U`, weight times
+/// `C`, and the weight, 0 for a position without an observation).
+#[derive(Default)]
+struct Dense {
+    at: Vec<u32>,
+    fx: Vec<f64>,
+    fy: Vec<f64>,
+    wo: Vec<f32>,
+    wc: Vec<f32>,
+    w: Vec<f32>,
+}
+
+impl Dense {
+    /// Room for `views` frames of a block of at most [`BATCH`] positions.
+    fn with_views(views: usize) -> Dense {
+        let n = views * BATCH;
+        Dense {
+            at: vec![0; n],
+            fx: vec![0.0; n],
+            fy: vec![0.0; n],
+            wo: vec![0.0; n],
+            wc: vec![0.0; n],
+            w: vec![0.0; n],
+        }
+    }
+}
+
+impl PassCtx<'_, '_> {
+    /// The V step's sums of one block (`ks`, positions of the order) of one frame (`pf`,
+    /// its samples `samples` in the block's order) without the statistics, into `num` and
+    /// `den` (by position in the block); the observations go to `out` from `slot` on (one
+    /// entry per position). Returns the number of observations. The same sums as
+    /// [`PassCtx::stages`] and [`PassCtx::v_sums`], written without branches so that the
+    /// compiler vectorises them: every position is computed, and one without an
+    /// observation weighs 0.
+    #[allow(clippy::too_many_arguments)]
+    fn dense<S: Copy + Into<u16>>(
+        &self,
+        pf: &Geom,
+        samples: &[S],
+        ks: std::ops::Range<usize>,
+        v_ord: &[f64],
+        num: &mut [f64],
+        den: &mut [f64],
+        out: &mut Dense,
+        slot: usize,
+    ) -> u64 {
+        let p = self.p;
+        let n = ks.len();
+        let grid = p.grid;
+        let (g_last, g_max) = ((grid - 1) as f64, (grid - 2) as f64);
+        let m = &pf.m;
+        let [rx, ry, rz] = &p.ordered_rays;
+        let (rx, ry, rz) = (&rx[ks.clone()], &ry[ks.clone()], &rz[ks]);
+        let samples = &samples[..n];
+        let (v_ord, num, den) = (&v_ord[..n], &mut num[..n], &mut den[..n]);
+        let range = slot..slot + n;
+        let at = &mut out.at[range.clone()];
+        let fxs = &mut out.fx[range.clone()];
+        let fys = &mut out.fy[range.clone()];
+        // the taps' positions on the plane, and whether they are on it: floating point
+        // alone, so that the loop is vectorised
+        for j in 0..n {
+            let r = [rx[j] as f64, ry[j] as f64, rz[j] as f64];
+            let w = m[2][0] * r[0] + m[2][1] * r[1] + m[2][2] * r[2];
+            let iw = 1.0 / w;
+            let gx = (m[0][0] * r[0] + m[0][1] * r[1] + m[0][2] * r[2]) * iw;
+            let gy = (m[1][0] * r[0] + m[1][1] * r[1] + m[1][2] * r[2]) * iw;
+            // in front of the camera (w = 1 / depth > 0) and inside the grid; NaN fails.
+            // Off the plane: -1, a valid tap weighed 0 below
+            let inside = w > 1e-12 && gx >= 0.0 && gy >= 0.0 && gx <= g_last && gy <= g_last;
+            fxs[j] = if inside { gx.min(g_max) } else { -1.0 };
+            fys[j] = if inside { gy.min(g_max) } else { 0.0 };
+        }
+        // the first tap and the fractions; saturated samples are no observation either
+        let top = self.top;
+        for j in 0..n {
+            let gx = if samples[j].into() == top {
+                -1.0
+            } else {
+                fxs[j]
+            };
+            let gy = fys[j];
+            let (x0, y0) = (floor_small(gx.max(0.0)), floor_small(gy));
+            at[j] = (y0 * grid as i32 + x0) as u32;
+            // a negative fraction marks the position without an observation
+            fxs[j] = gx - x0 as f64;
+            fys[j] = gy - y0 as f64;
+        }
+        let c = &self.model.c[..];
+        // the four taps of any first tap stay inside C
+        let at_max = c.len().saturating_sub(grid + 2);
+        let u = self.p.u;
+        let u_last = u.len() - 1;
+        let tables = self.tables;
+        let t = pf.exposure_ms;
+        let reg = self.reg2 / (pf.cells_per_px * pf.cells_per_px).max(1e-18);
+        let (reject, out2) = (self.model.reject, self.out2);
+        let wo = &mut out.wo[range.clone()];
+        let wc = &mut out.wc[range.clone()];
+        let ws = &mut out.w[range];
+        let mut count = 0u64;
+        for j in 0..n {
+            let a = (at[j] as usize).min(at_max);
+            let (fx, fy) = (fxs[j], fys[j]);
+            let c0 = c[a] as f64;
+            let c1 = c[a + 1] as f64;
+            let c2 = c[a + grid] as f64;
+            let c3 = c[a + grid + 1] as f64;
+            let upper = c0 + (c1 - c0) * fx;
+            let lower = c2 + (c3 - c2) * fx;
+            let cq = upper + (lower - upper) * fy;
+            let gx = (c1 - c0) * (1.0 - fy) + (c3 - c2) * fy;
+            let gy = lower - upper;
+            let grad2 = gx * gx + gy * gy;
+            let vx = v_ord[j];
+            let tv = t * vx;
+            let tc = t * cq;
+            let obs = u[(samples[j].into() as usize).min(u_last)];
+            let pred = tc * vx;
+            let bin = tables.bin(pred);
+            // sensor noise plus the error a misregistration makes where C has edges
+            let vr = tables.var[bin] + tv * tv * grad2 * reg;
+            let r = obs - pred;
+            // (observations where C is 0 count for the C step: it moves C from there)
+            let kept = fx >= 0.0 && tv > 0.0 && cq >= 0.0 && !(reject && r * r > out2 * vr);
+            let w = if kept { 1.0 / vr } else { 0.0 };
+            wo[j] = (w * obs) as f32;
+            wc[j] = (w * cq) as f32;
+            ws[j] = w as f32;
+            let wsum = if cq > 0.0 { w } else { 0.0 };
+            let wtc = wsum * tc;
+            num[j] += wtc * obs;
+            den[j] += wtc * tc;
+            count += (wsum > 0.0) as u64;
+        }
+        count
+    }
+
+    /// The C step's share of one frame's observations `d[slot .. slot + n]` (exposure `t`)
+    /// with the new `V` of their block (`new_v`, by position in the block), handed to
+    /// `splats` (which adds them to `cacc` band by band).
+    #[allow(clippy::too_many_arguments)]
+    fn splat_dense(
+        &self,
+        d: &Dense,
+        slot: usize,
+        n: usize,
+        t: f64,
+        new_v: &[f64],
+        splats: &mut Splats,
+        cacc: &mut [[f32; 2]],
+    ) {
+        let (at, fx, fy) = (
+            &d.at[slot..slot + n],
+            &d.fx[slot..slot + n],
+            &d.fy[slot..slot + n],
+        );
+        let (wo, wc, ws) = (
+            &d.wo[slot..slot + n],
+            &d.wc[slot..slot + n],
+            &d.w[slot..slot + n],
+        );
+        let new_v = &new_v[..n];
+        // neighbouring observations share taps: visited a few apart, consecutive updates of
+        // one cell do not wait on each other
+        for first in 0..SPLAT_STRIDE.min(n) {
+            for j in (first..n).step_by(SPLAT_STRIDE) {
+                let (w, tv) = (ws[j], t * new_v[j]);
+                // (a NaN V fails too)
+                if w == 0.0 || tv.is_nan() || tv <= 0.0 {
+                    continue;
+                }
+                // w tV r and w tV^2, with r = U - tV C
+                let num = (tv * (wo[j] as f64 - tv * wc[j] as f64)) as f32;
+                let den = (w as f64 * tv * tv) as f32;
+                let rec = Splat {
+                    at: at[j],
+                    fx: fx[j] as f32,
+                    fy: fy[j] as f32,
+                    num,
+                    den,
+                };
+                splats.push(rec, cacc);
+            }
+        }
+    }
+}
+
+/// One observation's share of the C step: the first bilinear tap, the fractions, and the
+/// numerator and denominator to spread over the four taps.
+#[derive(Clone, Copy, Default)]
+struct Splat {
+    at: u32,
+    fx: f32,
+    fy: f32,
+    num: f32,
+    den: f32,
+}
+
+/// The C step's splats gathered by band of cells before they are added: the observations
+/// of a block come from frames all over the plane, and added at once their updates miss the
+/// cache (the plane's sums are megabytes); a band's splats are added together, within a
+/// part of the sums that stays in the core's cache.
+struct Splats {
+    grid: usize,
+    /// Cells per band (a power of two: the band of a cell is `at >> shift`).
+    shift: u32,
+    /// Splats a band holds before they are added.
+    cap: usize,
+    pending: Vec<Splat>,
+    fill: Vec<usize>,
+    /// The cells reached so far: the smallest and one past the largest (`(usize::MAX, 0)`:
+    /// none).
+    touched: (usize, usize),
+}
+
+/// log2 of the cells per band of [`Splats`] (8192 cells: 64 KiB of sums).
+const SPLAT_BAND_SHIFT: u32 = 13;
+
+/// Splats a band of [`Splats`] holds (80 KiB; 10 MiB for the 123 bands of a 1000x1000 grid).
+const SPLAT_BAND_CAP: usize = 4096;
+
+impl Splats {
+    fn new(ncell: usize, grid: usize) -> Splats {
+        let bands = (ncell >> SPLAT_BAND_SHIFT) + 1;
+        Splats {
+            grid,
+            shift: SPLAT_BAND_SHIFT,
+            cap: SPLAT_BAND_CAP,
+            pending: vec![Splat::default(); bands * SPLAT_BAND_CAP],
+            fill: vec![0; bands],
+            touched: (usize::MAX, 0),
+        }
+    }
+
+    #[inline]
+    fn push(&mut self, s: Splat, cacc: &mut [[f32; 2]]) {
+        let b = (s.at >> self.shift) as usize;
+        let Some(f) = self.fill.get_mut(b) else {
+            return;
+        };
+        let i = *f;
+        self.pending[b * self.cap + i] = s;
+        *f = i + 1;
+        if i + 1 == self.cap {
+            self.add(b, cacc);
+        }
+    }
+
+    /// Adds band `b`'s pending splats to `cacc`.
+    fn add(&mut self, b: usize, cacc: &mut [[f32; 2]]) {
+        let grid = self.grid;
+        let n = std::mem::take(&mut self.fill[b]);
+        let (mut lo, mut hi) = self.touched;
+        for s in &self.pending[b * self.cap..b * self.cap + n] {
+            let a = s.at as usize;
+            lo = lo.min(a);
+            hi = hi.max(a + grid + 2);
+            // the two taps of a row are neighbours in memory: one update of four values
+            for (row, wy) in [(a, 1.0 - s.fy), (a + grid, s.fy)] {
+                let (w0, w1) = ((1.0 - s.fx) * wy, s.fx * wy);
+                if let Some([p0, p1]) = cacc.get_mut(row..row + 2) {
+                    p0[0] += w0 * s.num;
+                    p0[1] += w0 * s.den;
+                    p1[0] += w1 * s.num;
+                    p1[1] += w1 * s.den;
+                }
+            }
+        }
+        self.touched = (lo, hi);
+    }
+
+    /// Adds every pending splat; returns the range of cells reached.
+    fn finish(&mut self, cacc: &mut [[f32; 2]]) -> std::ops::Range<usize> {
+        for b in 0..self.fill.len() {
+            self.add(b, cacc);
+        }
+        let (lo, hi) = self.touched;
+        lo.min(hi)..hi.min(cacc.len())
     }
 }
 
@@ -1296,9 +1590,14 @@ enum Visit {
     Fused,
 }
 
-/// What a job of [`store_pass`] hands back: its pixels' positions, their V step's sums and
-/// the C step's numerator and denominator per cell.
-type StoreJob = (std::ops::Range<usize>, VSums, Vec<[f32; 2]>);
+/// What a job of [`store_pass`] hands back: its pixels' positions, their V step's sums, the
+/// C step's numerator and denominator per cell, and the range of cells they reach.
+type StoreJob = (
+    std::ops::Range<usize>,
+    VSums,
+    Vec<[f32; 2]>,
+    std::ops::Range<usize>,
+);
 
 /// Adds a job's C step sums to the totals.
 fn add_cells(num: &mut [f64], den: &mut [f64], cacc: &[[f32; 2]]) {
@@ -1331,6 +1630,14 @@ fn store_pass(
     let mut total = VSums::new(npx, levels);
     let mut num_total = vec![0.0f64; cells_needed];
     let mut den_total = vec![0.0f64; cells_needed];
+    // without the statistics, the V step's branch-free kernel ([`PassCtx::dense`]), which
+    // reads V in the visiting order
+    let dense_path = visit != Visit::C && !stats;
+    let v_ord: Vec<f64> = if dense_path {
+        p.order.iter().map(|&q| model.v[q as usize]).collect()
+    } else {
+        Vec::new()
+    };
     fold_frame_jobs(
         &p.jobs,
         |job| -> Result<StoreJob, PhotometricError> {
@@ -1357,6 +1664,24 @@ fn store_pass(
             // where each view's kept observations end, and its exposure
             let mut groups: Vec<(usize, f64)> = Vec::with_capacity(views.len());
             let mut view_order: Vec<(u64, u32)> = Vec::with_capacity(views.len());
+            let (mut num_blk, mut den_blk, mut new_v_blk) = (
+                vec![0.0f64; BATCH],
+                vec![0.0f64; BATCH],
+                vec![0.0f64; BATCH],
+            );
+            let mut dense = if dense_path && visit == Visit::Fused {
+                Dense::with_views(views.len())
+            } else {
+                Dense::with_views(1)
+            };
+            let mut splats = Splats::new(
+                if dense_path && visit == Visit::Fused {
+                    cells_needed
+                } else {
+                    0
+                },
+                p.grid,
+            );
             for block in blocks {
                 kept.clear();
                 groups.clear();
@@ -1371,6 +1696,48 @@ fn store_pass(
                     (key, vi as u32)
                 }));
                 view_order.sort_unstable();
+                if dense_path {
+                    let len = block.len();
+                    num_blk[..len].fill(0.0);
+                    den_blk[..len].fill(0.0);
+                    let v_blk = &v_ord[block.clone()];
+                    for (vo, &(_, vi)) in view_order.iter().enumerate() {
+                        let geom = &views[vi as usize].geom;
+                        let (nb, db) = (&mut num_blk[..], &mut den_blk[..]);
+                        // (the V step alone needs no observation after its sums)
+                        let slot = if visit == Visit::Fused { vo * len } else { 0 };
+                        acc.v.nobs += match store.block(block, vi as usize) {
+                            SamplesRef::U8(d) => {
+                                ctx.dense(geom, d, block.clone(), v_blk, nb, db, &mut dense, slot)
+                            }
+                            SamplesRef::U16(d) => {
+                                ctx.dense(geom, d, block.clone(), v_blk, nb, db, &mut dense, slot)
+                            }
+                        };
+                    }
+                    for (j, &q) in p.order[block.clone()].iter().enumerate() {
+                        let a = q as usize - start;
+                        acc.v.num[a] += num_blk[j];
+                        acc.v.den[a] += den_blk[j];
+                    }
+                    if visit == Visit::Fused {
+                        // the block's new V (unscaled), and its observations' share of the
+                        // C step
+                        for j in 0..len {
+                            new_v_blk[j] = if den_blk[j] > 0.0 {
+                                num_blk[j] / den_blk[j]
+                            } else {
+                                v_blk[j]
+                            };
+                        }
+                        for (vo, &(_, vi)) in view_order.iter().enumerate() {
+                            let t = views[vi as usize].geom.exposure_ms;
+                            let (d, nv) = (&dense, &new_v_blk);
+                            ctx.splat_dense(d, vo * len, len, t, nv, &mut splats, &mut acc.cacc);
+                        }
+                    }
+                    continue;
+                }
                 for &(_, vi) in &view_order {
                     let view = &views[vi as usize];
                     match store.block(block, vi as usize) {
@@ -1411,15 +1778,27 @@ fn store_pass(
                     from = to;
                 }
             }
-            Ok((start..end, acc.v, acc.cacc))
+            // the dense kernel's splats say which cells they reached (only those are added
+            // to the totals); else all of them
+            let reached = if dense_path {
+                splats.finish(&mut acc.cacc)
+            } else {
+                0..cells_needed
+            };
+            Ok((start..end, acc.v, acc.cacc, reached))
         },
-        |(range, vs, cacc)| {
+        |(range, vs, cacc, reached)| {
             if npx > 0 {
                 total.add_range(&vs, range.start);
             } else {
                 total.add_statistics(&vs);
             }
-            add_cells(&mut num_total, &mut den_total, &cacc);
+            let r = reached;
+            add_cells(
+                &mut num_total[r.clone()],
+                &mut den_total[r.clone()],
+                &cacc[r],
+            );
         },
     )?;
     let c = if cells_needed > 0 {
