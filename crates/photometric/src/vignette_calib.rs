@@ -152,7 +152,7 @@ impl Default for VignetteOptions {
             min_observations: 8,
             registration_px: 0.25,
             smoothing_px: None,
-            memory_mb: 160,
+            memory_mb: 80,
         }
     }
 }
@@ -1259,11 +1259,11 @@ struct Splats {
     touched: (usize, usize),
 }
 
-/// log2 of the cells per band of [`Splats`] (8192 cells: 64 KiB of sums).
-const SPLAT_BAND_SHIFT: u32 = 13;
+/// log2 of the cells per band of [`Splats`] (16384 cells: 128 KiB of sums).
+const SPLAT_BAND_SHIFT: u32 = 14;
 
-/// Splats a band of [`Splats`] holds (80 KiB; 10 MiB for the 123 bands of a 1000x1000 grid).
-const SPLAT_BAND_CAP: usize = 4096;
+/// Splats a band of [`Splats`] holds (40 KiB; 2.5 MiB for the 62 bands of a 1000x1000 grid).
+const SPLAT_BAND_CAP: usize = 2048;
 
 impl Splats {
     fn new(ncell: usize, grid: usize) -> Splats {

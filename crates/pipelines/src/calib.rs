@@ -692,7 +692,7 @@ impl VignetteRun {
 }
 
 /// Poses (from the marker or the poses file) and the calibration, without writing anything:
-/// the calibration keeps the frames in memory when they fit in its `memory_mb` (160 MiB by
+/// the calibration keeps the frames in memory when they fit in its `memory_mb` (80 MiB by
 /// default), else decodes them on every pass.
 /// Progress goes to `observer` (stages as `begin`/`advance`, iterations as `status`).
 pub fn calibrate_vignette_sequence(
