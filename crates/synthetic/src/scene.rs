@@ -22,16 +22,37 @@ fn hash(seed: u64, x: i64, y: i64) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
-fn value_noise_with(lattice: impl Fn(i64, i64) -> f64, x: f64, y: f64) -> f64 {
+/// Lattice values of the texture's octaves.
+trait Lattice {
+    /// The lattice values of the cell of octave `o` whose lower corner is `(xi, yi)`:
+    /// `[(xi, yi), (xi + 1, yi), (xi, yi + 1), (xi + 1, yi + 1)]`.
+    fn corners(&self, o: usize, xi: i64, yi: i64) -> [f64; 4];
+}
+
+/// Value noise of octave `o` of `lattice` at `(x, y)`.
+#[inline(always)]
+fn value_noise<L: Lattice>(lattice: &L, o: usize, x: f64, y: f64) -> f64 {
     let (xi, yi) = (floor(x), floor(y));
     let (fx, fy) = (x - xi, y - yi);
     let (sx, sy) = (fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy));
-    let (xi, yi) = (xi as i64, yi as i64);
-    let a = lattice(xi, yi);
-    let b = lattice(xi + 1, yi);
-    let c = lattice(xi, yi + 1);
-    let d = lattice(xi + 1, yi + 1);
+    let [a, b, c, d] = lattice.corners(o, xi as i64, yi as i64);
     a + (b - a) * sx + (c - a) * sy + (a - b - c + d) * sx * sy
+}
+
+/// The lattice values of [`texture`] of one seed, hashed.
+struct Hashed(u64);
+
+impl Lattice for Hashed {
+    #[inline(always)]
+    fn corners(&self, o: usize, xi: i64, yi: i64) -> [f64; 4] {
+        let s = self.0.wrapping_add(OCTAVE_SEEDS[o]);
+        [
+            hash(s, xi, yi),
+            hash(s, xi + 1, yi),
+            hash(s, xi, yi + 1),
+            hash(s, xi + 1, yi + 1),
+        ]
+    }
 }
 
 /// `x.floor()` without a call into the C library (the baseline x86-64 has no rounding
@@ -56,26 +77,22 @@ const OCTAVE_SEEDS: [u64; 5] = [0, 1, 2, 3, 99];
 
 /// Procedural texture with a wide dynamic range: relative radiance in about `[0.05, 1.5]`.
 pub fn texture(seed: u64, x: f64, y: f64) -> f64 {
-    texture_with(
-        |o, xi, yi| hash(seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi),
-        x,
-        y,
-    )
+    texture_with(&Hashed(seed), x, y)
 }
 
-/// [`texture`] with the lattice values of octave `o` given by `lattice(o, xi, yi)`.
-#[inline]
-fn texture_with(lattice: impl Fn(usize, i64, i64) -> f64, x: f64, y: f64) -> f64 {
+/// [`texture`] with the lattice values of `lattice`.
+#[inline(always)]
+fn texture_with<L: Lattice>(lattice: &L, x: f64, y: f64) -> f64 {
     let mut v = 0.0;
     let mut amp = 0.5;
     let mut f = 0.7;
     for o in 0..4 {
-        v += amp * value_noise_with(|xi, yi| lattice(o, xi, yi), x * f, y * f);
+        v += amp * value_noise(lattice, o, x * f, y * f);
         amp *= 0.5;
         f *= 2.3;
     }
     // v in ~[0, 0.94]; sharpen into patches of very different brightness
-    let patch = value_noise_with(|xi, yi| lattice(4, xi, yi), x * 0.25, y * 0.25);
+    let patch = value_noise(lattice, 4, x * 0.25, y * 0.25);
     let base = (4.0 * (v - 0.47)).exp() * (0.35 + 1.3 * patch * patch);
     base.clamp(0.03, 3.0) * 0.5
 }
@@ -101,62 +118,108 @@ const MAX_TABLE: usize = 1 << 22;
 #[derive(Clone)]
 pub(crate) struct TextureTable {
     seed: u64,
-    /// Per octave: the lattice origin, the table's width and height, and its values.
-    octaves: Vec<(i64, i64, u64, u64, Vec<f64>)>,
+    /// The lattice tables of the octaves.
+    octaves: [Octave; 5],
+}
+
+/// The lattice values of one octave of a [`TextureTable`] over `nx x ny` points from
+/// `(x0, y0)`, row by row (empty: every point is hashed).
+#[derive(Clone, Default)]
+struct Octave {
+    x0: i64,
+    y0: i64,
+    nx: u64,
+    ny: u64,
+    /// `nx - 1` and `ny - 1` (0 without a table): the cells whose corners are all in it.
+    cells: (u64, u64),
+    values: Vec<f64>,
 }
 
 impl std::fmt::Debug for TextureTable {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let n: usize = self.octaves.iter().map(|o| o.4.len()).sum();
+        let n: usize = self.octaves.iter().map(|o| o.values.len()).sum();
         write!(f, "TextureTable(seed {}, {n} lattice values)", self.seed)
     }
 }
 
 impl TextureTable {
     pub(crate) fn new(seed: u64, x_range: [f64; 2], y_range: [f64; 2]) -> TextureTable {
-        let octaves = OCTAVE_SEEDS
-            .iter()
-            .zip(octave_frequencies())
-            .map(|(&o, f)| {
-                let s = seed.wrapping_add(o);
-                // one lattice point of margin either side (and the +1 neighbour); no table
-                // for a range that is not finite or too large
-                let finite = x_range.iter().chain(&y_range).all(|v| v.abs() < 1e12);
-                if !finite {
-                    return (0, 0, 0, 0, Vec::new());
-                }
-                let lo = |v: f64| (v * f).floor() as i64 - 1;
-                let hi = |v: f64| (v * f).floor() as i64 + 2;
-                let (x0, y0) = (lo(x_range[0]), lo(y_range[0]));
-                let nx = (hi(x_range[1]) - x0 + 1).max(0) as usize;
-                let ny = (hi(y_range[1]) - y0 + 1).max(0) as usize;
-                if nx.saturating_mul(ny) > MAX_TABLE {
-                    return (0, 0, 0, 0, Vec::new());
-                }
-                let values = (0..nx * ny)
-                    .map(|i| hash(s, x0 + (i % nx) as i64, y0 + (i / nx) as i64))
-                    .collect();
-                (x0, y0, nx as u64, ny as u64, values)
-            })
-            .collect();
+        let freqs = octave_frequencies();
+        let octaves = std::array::from_fn(|k| {
+            let (s, f) = (seed.wrapping_add(OCTAVE_SEEDS[k]), freqs[k]);
+            // one lattice point of margin either side (and the +1 neighbour); no table
+            // for a range that is not finite or too large
+            let finite = x_range.iter().chain(&y_range).all(|v| v.abs() < 1e12);
+            if !finite {
+                return Octave::default();
+            }
+            let lo = |v: f64| (v * f).floor() as i64 - 1;
+            let hi = |v: f64| (v * f).floor() as i64 + 2;
+            let (x0, y0) = (lo(x_range[0]), lo(y_range[0]));
+            let nx = (hi(x_range[1]) - x0 + 1).max(0) as usize;
+            let ny = (hi(y_range[1]) - y0 + 1).max(0) as usize;
+            if nx.saturating_mul(ny) > MAX_TABLE {
+                return Octave::default();
+            }
+            let values = (0..nx * ny)
+                .map(|i| hash(s, x0 + (i % nx) as i64, y0 + (i / nx) as i64))
+                .collect();
+            Octave {
+                x0,
+                y0,
+                nx: nx as u64,
+                ny: ny as u64,
+                cells: ((nx as u64).saturating_sub(1), (ny as u64).saturating_sub(1)),
+                values,
+            }
+        });
         TextureTable { seed, octaves }
     }
 
     /// [`texture`]`(seed, x, y)`.
     pub(crate) fn texture(&self, x: f64, y: f64) -> f64 {
-        texture_with(
-            |o, xi, yi| {
-                let (x0, y0, nx, ny, values) = &self.octaves[o];
-                let (dx, dy) = (xi.wrapping_sub(*x0) as u64, yi.wrapping_sub(*y0) as u64);
-                if dx < *nx && dy < *ny {
-                    values[(dy * nx + dx) as usize]
-                } else {
-                    hash(self.seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi)
-                }
-            },
-            x,
-            y,
-        )
+        texture_with(self, x, y)
+    }
+
+    /// The lattice value at `(xi, yi)` of octave `o` (the table's or the hash).
+    fn lattice(&self, o: usize, xi: i64, yi: i64) -> f64 {
+        let oct = &self.octaves[o];
+        let (dx, dy) = (
+            xi.wrapping_sub(oct.x0) as u64,
+            yi.wrapping_sub(oct.y0) as u64,
+        );
+        if dx < oct.nx && dy < oct.ny {
+            if let Some(&v) = oct.values.get((dy * oct.nx + dx) as usize) {
+                return v;
+            }
+        }
+        hash(self.seed.wrapping_add(OCTAVE_SEEDS[o]), xi, yi)
+    }
+}
+
+impl Lattice for TextureTable {
+    /// From the table when the whole cell is in it (one range check), else point by point.
+    #[inline(always)]
+    fn corners(&self, o: usize, xi: i64, yi: i64) -> [f64; 4] {
+        let oct = &self.octaves[o];
+        let (dx, dy) = (
+            xi.wrapping_sub(oct.x0) as u64,
+            yi.wrapping_sub(oct.y0) as u64,
+        );
+        if dx < oct.cells.0 && dy < oct.cells.1 {
+            let (nx, i) = (oct.nx as usize, (dy * oct.nx + dx) as usize);
+            if let (Some(r0), Some(r1)) =
+                (oct.values.get(i..i + 2), oct.values.get(i + nx..i + nx + 2))
+            {
+                return [r0[0], r0[1], r1[0], r1[1]];
+            }
+        }
+        [
+            self.lattice(o, xi, yi),
+            self.lattice(o, xi + 1, yi),
+            self.lattice(o, xi, yi + 1),
+            self.lattice(o, xi + 1, yi + 1),
+        ]
     }
 }
 

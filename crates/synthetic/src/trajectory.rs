@@ -7,6 +7,8 @@
 //! an arbitrary similarity of the whole estimate, keyframe subsets, lost tracking and
 //! backwards playback.
 
+use std::fmt::Write as _;
+
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use crate::rng::Rng;
@@ -209,12 +211,13 @@ impl Path {
             if self.in_segment(i) {
                 let p = self.positions[i];
                 let q = canonical(UnitQuaternion::from_rotation_matrix(&self.rotations[i]));
-                s.push_str(&format!(
-                    "{t:.6} {} {} {} {} {} {} {}\n",
+                let _ = writeln!(
+                    s,
+                    "{t:.6} {} {} {} {} {} {} {}",
                     p[0], p[1], p[2], q.i, q.j, q.k, q.w
-                ));
+                );
             } else {
-                s.push_str(&format!("{t:.6} NaN NaN NaN NaN NaN NaN NaN\n"));
+                let _ = writeln!(s, "{t:.6} NaN NaN NaN NaN NaN NaN NaN");
             }
         }
         s
@@ -367,10 +370,11 @@ pub fn tum_text(poses: &[EstimatedPose]) -> String {
     let mut s = String::with_capacity(poses.len() * 120);
     for p in poses {
         let q = p.orientation;
-        s.push_str(&format!(
-            "{:.6} {} {} {} {} {} {} {}\n",
+        let _ = writeln!(
+            s,
+            "{:.6} {} {} {} {} {} {} {}",
             p.t, p.position[0], p.position[1], p.position[2], q.i, q.j, q.k, q.w
-        ));
+        );
     }
     s
 }
