@@ -23,6 +23,7 @@
 #![deny(missing_docs)]
 
 pub mod camera;
+mod float;
 pub mod plane;
 pub mod results;
 mod rng;

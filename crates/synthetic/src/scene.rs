@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 
 use crate::camera::{ground_truth_vignette, FovCamera, RayCache, ResponseCurve};
+use crate::float::floor;
 use crate::sensor::Sensor;
 use nalgebra::Vector3;
 
@@ -52,22 +53,6 @@ impl Lattice for Hashed {
             hash(s, xi, yi + 1),
             hash(s, xi + 1, yi + 1),
         ]
-    }
-}
-
-/// `x.floor()` without a call into the C library (the baseline x86-64 has no rounding
-/// instruction): the same value.
-#[inline]
-fn floor(x: f64) -> f64 {
-    if x.abs() < 4.5e15 {
-        let t = x as i64 as f64;
-        if t > x {
-            t - 1.0
-        } else {
-            t
-        }
-    } else {
-        x.floor()
     }
 }
 
