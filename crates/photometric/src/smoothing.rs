@@ -231,6 +231,42 @@ fn local_linear(
     (out, var)
 }
 
+/// The defective pixels (hot, dead, a speck of dust) of the map `raw` (`w` x `h`, row-major)
+/// whose pixels have the weights `wt` (`1 / variance`; 0: no estimate): those more than
+/// [`DEFECT_SIGMAS`] standard deviations (of the difference of two estimates) from the median
+/// of their 5x5 neighbourhood, which one defect does not move.
+pub(crate) fn find_defects(w: usize, h: usize, raw: &[f64], wt: &[f64]) -> Vec<bool> {
+    let mut flagged = vec![false; w * h];
+    flagged.par_chunks_mut(w.max(1)).enumerate().for_each_init(
+        || Vec::with_capacity(25),
+        |nb, (y, row)| {
+            for (x, flag) in row.iter_mut().enumerate() {
+                let i = y * w + x;
+                if wt[i].is_nan() || wt[i] <= 0.0 {
+                    continue;
+                }
+                nb.clear();
+                for yy in y.saturating_sub(DEFECT_RADIUS)..(y + DEFECT_RADIUS + 1).min(h) {
+                    for xx in x.saturating_sub(DEFECT_RADIUS)..(x + DEFECT_RADIUS + 1).min(w) {
+                        let j = yy * w + xx;
+                        if j != i && wt[j] > 0.0 {
+                            nb.push(raw[j]);
+                        }
+                    }
+                }
+                if nb.len() < 4 {
+                    continue;
+                }
+                let mid = nb.len() / 2;
+                let med = *nb.select_nth_unstable_by(mid, f64::total_cmp).1;
+                let z = (raw[i] - med) * (wt[i] / 2.0).sqrt();
+                *flag = z.abs() > DEFECT_SIGMAS;
+            }
+        },
+    );
+    flagged
+}
+
 /// Chooses the smoothing (or applies `fixed`) and smooths `raw`; NaN pixels of `raw` are
 /// filled from their neighbourhood (the widest kernel where the chosen one sees no data).
 pub(crate) fn choose_smoothing(
@@ -253,38 +289,9 @@ pub(crate) fn choose_smoothing(
         })
         .collect();
     // defective pixels (hot, dead, a speck of dust) are real in both halves of the data, so
-    // cross-validation would keep them; they are found against a moderate smoothing and left
-    // out of the smooth map
-    // (against the median of the 5x5 neighbourhood, which one defect does not move)
+    // cross-validation would keep them; they are left out of the smooth map
+    let flagged = find_defects(w, h, raw, &wt);
     let mut defects = 0usize;
-    let mut flagged = vec![false; n];
-    let mut nb = Vec::with_capacity(25);
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if wt[i] <= 0.0 {
-                continue;
-            }
-            nb.clear();
-            for yy in y.saturating_sub(DEFECT_RADIUS)..(y + DEFECT_RADIUS + 1).min(h) {
-                for xx in x.saturating_sub(DEFECT_RADIUS)..(x + DEFECT_RADIUS + 1).min(w) {
-                    let j = yy * w + xx;
-                    if j != i && wt[j] > 0.0 {
-                        nb.push(raw[j]);
-                    }
-                }
-            }
-            if nb.len() < 4 {
-                continue;
-            }
-            nb.sort_by(f64::total_cmp);
-            let med = nb[nb.len() / 2];
-            let z = (raw[i] - med) / (2.0 * raw_var[i]).sqrt();
-            if z.abs() > DEFECT_SIGMAS {
-                flagged[i] = true;
-            }
-        }
-    }
     for i in 0..n {
         if flagged[i] {
             wt[i] = 0.0;
@@ -473,5 +480,38 @@ mod tests {
                 assert!(var[i].is_finite() && var[i] > 0.0);
             }
         }
+    }
+
+    #[test]
+    fn defects_are_found_on_a_sloped_noisy_map_and_nothing_else() {
+        // a vignette-like slope (two standard deviations per pixel at most: the median of a
+        // border pixel's one-sided neighbourhood is off by about its slope) with noise of a
+        // known standard deviation (a fixed pseudo-random sequence), one hot and one dead
+        // pixel, a pixel without an estimate, and the borders and corners in play
+        let (w, h) = (40usize, 30usize);
+        let sd = 1e-3;
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut noise = || {
+            // the sum of four uniforms: close to normal, never beyond 3.5 sd
+            let mut s = 0.0;
+            for _ in 0..4 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                s += (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            }
+            s * sd * 3.0f64.sqrt()
+        };
+        let mut v: Vec<f64> = (0..w * h)
+            .map(|i| 0.6 + 0.002 * (i % w) as f64 - 0.001 * (i / w) as f64 + noise())
+            .collect();
+        let mut wt = vec![1.0 / (sd * sd); w * h];
+        let (hot, dead, none) = (7 * w + 11, (h - 1) * w, 3 * w + 3);
+        v[hot] += 0.05;
+        v[dead] = 0.0;
+        wt[none] = 0.0;
+        let flagged = find_defects(w, h, &v, &wt);
+        let found: Vec<usize> = (0..w * h).filter(|&i| flagged[i]).collect();
+        assert_eq!(found, vec![hot, dead]);
     }
 }

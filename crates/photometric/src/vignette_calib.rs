@@ -11,8 +11,9 @@
 //!   Observations far beyond their noise are dropped once the fit has settled.
 //! * **Solved to convergence**: block updates of `V` (exact per pixel) and of `C` (a Jacobi
 //!   step on the exact bilinear least-squares problem), accelerated by Anderson mixing,
-//!   until the relative change of `V` is below the tolerance, or below a small fraction of
-//!   the raw map's standard error (the iteration's error is then far below the noise's).
+//!   until the relative change of `V` (over the pixels that are not defective) is below the
+//!   tolerance, or below a small fraction of the raw map's standard error (the iteration's
+//!   error is then far below the noise's).
 //!   Frames are streamed: memory does not grow with their number.
 //! * **Observable or refused**: the pixel-cell graph (two unknowns joined when one observation
 //!   links them) must be connected, else the scale of `V` differs between its parts and the
@@ -28,7 +29,7 @@ use camera_model::{CameraModel, Image, ImageSize};
 use rayon::prelude::*;
 
 use crate::noise::{fit_noise, NoiseModel};
-use crate::smoothing::{choose_smoothing, SmoothingChoice};
+use crate::smoothing::{choose_smoothing, find_defects, SmoothingChoice};
 use crate::{InverseResponse, PhotometricError};
 
 /// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`, the plane being
@@ -376,6 +377,8 @@ struct Problem<'a> {
     /// The pixels the problem has, as indices into the image (all of them, or a coarse
     /// sample); `V` is indexed by their position here.
     sample: Vec<u32>,
+    /// The sample as a grid (width, height), row-major: the neighbours of a position.
+    layout: (usize, usize),
     /// The order in which the passes visit the sample (positions in it): image tiles of
     /// [`TILE_W`] x [`TILE_H`] pixels, row by row (see [`tile_order`]).
     order: Vec<u32>,
@@ -402,7 +405,7 @@ impl<'a> Problem<'a> {
     fn new(
         frames: &'a dyn PlaneFrames,
         rays: &'a [[f32; 3]],
-        sample: Vec<u32>,
+        (sample, layout): (Vec<u32>, (usize, usize)),
         size: ImageSize,
         u: &'a [f64],
         options: &'a VignetteOptions,
@@ -415,6 +418,7 @@ impl<'a> Problem<'a> {
             frames,
             rays,
             sample,
+            layout,
             order,
             ordered_rays,
             ordered_pix,
@@ -2119,10 +2123,18 @@ pub fn calibrate_vignette(
                 })
             })
             .collect();
-        Problem::new(frames, &rays, sample, size, u, options, grid / stride)
+        Problem::new(
+            frames,
+            &rays,
+            (sample, (cw, ch)),
+            size,
+            u,
+            options,
+            grid / stride,
+        )
     });
     let all = (0..npx as u32).collect();
-    let problem = Problem::new(frames, &rays, all, size, u, options, grid);
+    let problem = Problem::new(frames, &rays, (all, (w, h)), size, u, options, grid);
     // one visit of the frames: the observation graph, and the frames in memory for the
     // iterations where they fit (the coarse stage's first)
     let stages: Vec<&Problem<'_>> = coarse.iter().chain([&problem]).collect();
@@ -2303,6 +2315,8 @@ fn solve(
     let mut converged = false;
     let mut iterations = 0;
     let ncell = model.c.len();
+    let layout = problem.layout;
+    let mut defective = vec![false; npx];
     // outliers are dropped from the SETTLE-th iteration; the noise model follows the
     // residuals for NOISE_FIT_ITERATIONS; from then on the problem is fixed
     const SETTLE: usize = 4;
@@ -2328,6 +2342,14 @@ fn solve(
         for ((g, n), d) in gv.iter_mut().zip(&vs.num).zip(&vs.den) {
             if *d > 0.0 {
                 *g = n / d;
+            }
+        }
+        // the defective pixels of the stop rule below (once the noise model, the scale of
+        // `den`, is fixed: the rule applies from then on)
+        if warm_start || it >= NOISE_FIT_ITERATIONS {
+            let found = find_defects(layout.0, layout.1, &gv, &vs.den);
+            for (d, f) in defective.iter_mut().zip(found) {
+                *d |= f;
             }
         }
         // the gauge: mean V over observed pixels = 1 (C absorbs the scale)
@@ -2369,14 +2391,23 @@ fn solve(
             }
         }
         let new_c: Vec<f32> = (0..ncell).map(|j| nc[j].max(0.0) as f32).collect();
-        let (s2, n2) = new_v
-            .iter()
-            .zip(&old_v)
-            .zip(&vs.den)
-            .filter(|(_, d)| **d > 0.0)
-            .fold((0.0, 0usize), |(s, n), ((a, b), _)| {
-                (s + ((a - b) / b).powi(2), n + 1)
-            });
+        // the change of V over the pixels the raw map keeps. Left out: a defective pixel
+        // (hot, dead; found so in any iteration of the stage), whose observations go in and
+        // out of the outlier set as V moves, so that it jumps by up to several times its
+        // value between iterations and would hold up the convergence of the rest (with more
+        // than half of the pixels found defective, all of them count)
+        let mut all = (0.0, 0usize);
+        let mut kept = (0.0, 0usize);
+        for ((a, b), (d, bad)) in new_v.iter().zip(&old_v).zip(vs.den.iter().zip(&defective)) {
+            if *d > 0.0 {
+                let c = ((a - b) / b).powi(2);
+                all = (all.0 + c, all.1 + 1);
+                if !*bad {
+                    kept = (kept.0 + c, kept.1 + 1);
+                }
+            }
+        }
+        let (s2, n2) = if 2 * kept.1 > all.1 { kept } else { all };
         let delta = (s2 / n2.max(1) as f64).sqrt();
         model.v = new_v;
         model.c = new_c;
