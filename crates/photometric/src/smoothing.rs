@@ -144,50 +144,77 @@ fn local_linear(
     let val: Vec<f64> = (0..n)
         .map(|i| if v[i].is_finite() { v[i] } else { 0.0 })
         .collect();
-    let img = |f: &dyn Fn(usize) -> f64| -> Vec<f64> {
-        let src: Vec<f64> = (0..n).map(f).collect();
-        blur(&src, w, h, r)
-    };
-    let s0 = img(&|i| wv[i]);
-    let sx = img(&|i| wv[i] * xs(i));
-    let sy = img(&|i| wv[i] * ys(i));
-    let sxx = img(&|i| wv[i] * xs(i) * xs(i));
-    let sxy = img(&|i| wv[i] * xs(i) * ys(i));
-    let syy = img(&|i| wv[i] * ys(i) * ys(i));
-    let sv = img(&|i| wv[i] * val[i]);
-    let svx = img(&|i| wv[i] * val[i] * xs(i));
-    let svy = img(&|i| wv[i] * val[i] * ys(i));
+    // the moment images, blurred in parallel (each blur is sequential)
+    type Moment<'m> = (usize, &'m (dyn Fn(usize) -> f64 + Sync));
+    let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
+    let m_s0 = |i: usize| wv[i];
+    let m_sx = |i: usize| wv[i] * xs(i);
+    let m_sy = |i: usize| wv[i] * ys(i);
+    let m_sxx = |i: usize| wv[i] * xs(i) * xs(i);
+    let m_sxy = |i: usize| wv[i] * xs(i) * ys(i);
+    let m_syy = |i: usize| wv[i] * ys(i) * ys(i);
+    let m_sv = |i: usize| wv[i] * val[i];
+    let m_svx = |i: usize| wv[i] * val[i] * xs(i);
+    let m_svy = |i: usize| wv[i] * val[i] * ys(i);
+    let mut moments: Vec<Moment<'_>> = vec![
+        (r, &m_s0),
+        (r, &m_sx),
+        (r, &m_sy),
+        (r, &m_sxx),
+        (r, &m_sxy),
+        (r, &m_syy),
+        (r, &m_sv),
+        (r, &m_svx),
+        (r, &m_svy),
+    ];
     // for the variance: the same moments with the squared kernel, a kernel of sigma / sqrt 2
     // scaled by 1 / (4 pi sigma^2) relative to a unit-sum kernel
-    let (q0, qx, qy, qxx, qxy, qyy, norm2) = if variance {
-        let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
-        let img2 = |f: &dyn Fn(usize) -> f64| -> Vec<f64> {
+    if variance {
+        moments.extend_from_slice(&[
+            (r2, &m_s0),
+            (r2, &m_sx),
+            (r2, &m_sy),
+            (r2, &m_sxx),
+            (r2, &m_sxy),
+            (r2, &m_syy),
+        ]);
+    }
+    let mut blurred: Vec<Vec<f64>> = moments
+        .par_iter()
+        .map(|&(radius, f)| {
             let src: Vec<f64> = (0..n).map(f).collect();
-            blur(&src, w, h, r2)
-        };
-        // kernel sums: sum K = (2r+1)^6, sum K2 (the r2 kernel) = (2 r2 + 1)^6; the squared
-        // unit-sum kernel sums to 1 / (4 pi sigma^2)
-        let sum_k = ((2 * r + 1) as f64).powi(6);
-        let sum_k2 = ((2 * r2 + 1) as f64).powi(6);
-        let sig = sigma_of_radius(r);
-        let factor = sum_k * sum_k / (4.0 * std::f64::consts::PI * sig * sig) / sum_k2;
-        (
-            img2(&|i| wv[i]),
-            img2(&|i| wv[i] * xs(i)),
-            img2(&|i| wv[i] * ys(i)),
-            img2(&|i| wv[i] * xs(i) * xs(i)),
-            img2(&|i| wv[i] * xs(i) * ys(i)),
-            img2(&|i| wv[i] * ys(i) * ys(i)),
-            factor,
-        )
-    } else {
-        (vec![], vec![], vec![], vec![], vec![], vec![], 0.0)
+            blur(&src, w, h, radius)
+        })
+        .collect();
+    let q = blurred.split_off(9.min(blurred.len()));
+    let (s0, sx, sy, sxx, sxy, syy, sv, svx, svy) = match &blurred[..] {
+        [s0, sx, sy, sxx, sxy, syy, sv, svx, svy] => (s0, sx, sy, sxx, sxy, syy, sv, svx, svy),
+        _ => return (vec![f64::NAN; n], vec![f64::NAN; n]),
     };
-    let mut out = vec![f64::NAN; n];
-    let mut var = vec![f64::NAN; n];
-    for i in 0..n {
+    let (q0, qx, qy, qxx, qxy, qyy, norm2) = match &q[..] {
+        [q0, qx, qy, qxx, qxy, qyy] => {
+            // kernel sums: sum K = (2r+1)^6, sum K2 (the r2 kernel) = (2 r2 + 1)^6; the
+            // squared unit-sum kernel sums to 1 / (4 pi sigma^2)
+            let sum_k = ((2 * r + 1) as f64).powi(6);
+            let sum_k2 = ((2 * r2 + 1) as f64).powi(6);
+            let sig = sigma_of_radius(r);
+            let factor = sum_k * sum_k / (4.0 * std::f64::consts::PI * sig * sig) / sum_k2;
+            (
+                &q0[..],
+                &qx[..],
+                &qy[..],
+                &qxx[..],
+                &qxy[..],
+                &qyy[..],
+                factor,
+            )
+        }
+        _ => (&[][..], &[][..], &[][..], &[][..], &[][..], &[][..], 0.0),
+    };
+    // each pixel's weighted plane fit (in parallel over the pixels)
+    let fit = |i: usize| -> (f64, f64) {
         if s0[i] <= 0.0 {
-            continue;
+            return (f64::NAN, f64::NAN);
         }
         let (xp, yp) = (xs(i), ys(i));
         let a01 = sx[i] - xp * s0[i];
@@ -207,7 +234,7 @@ fn local_linear(
         };
         match inv {
             Some(mi) => {
-                out[i] = (mi * b)[0];
+                let out = (mi * b)[0];
                 if variance {
                     let c01 = qx[i] - xp * q0[i];
                     let c02 = qy[i] - yp * q0[i];
@@ -217,18 +244,22 @@ fn local_linear(
                     let q = nalgebra::Matrix3::new(q0[i], c01, c02, c01, c11, c12, c02, c12, c22)
                         * norm2;
                     let e = mi.row(0);
-                    var[i] = (e * q * e.transpose())[(0, 0)].max(0.0);
+                    (out, (e * q * e.transpose())[(0, 0)].max(0.0))
+                } else {
+                    (out, f64::NAN)
                 }
             }
             None => {
-                out[i] = sv[i] / s0[i];
+                let out = sv[i] / s0[i];
                 if variance {
-                    var[i] = q0[i] * norm2 / (s0[i] * s0[i]);
+                    (out, q0[i] * norm2 / (s0[i] * s0[i]))
+                } else {
+                    (out, f64::NAN)
                 }
             }
         }
-    }
-    (out, var)
+    };
+    (0..n).into_par_iter().with_min_len(4096).map(fit).unzip()
 }
 
 /// The defective pixels (hot, dead, a speck of dust) of the map `raw` (`w` x `h`, row-major)
