@@ -520,12 +520,14 @@ pub fn write_results(out: &OutputDir, a: &ResultsSpec, observer: &dyn Observer) 
         .into_par_iter()
         .map(|i| sequence_path(a.seed, i, cfg.frames))
         .collect();
+    // the files go straight into the staging folder, which appears whole at the commit: a
+    // temporary, an fsync and a rename per file (as `write_atomic` does for a lone file)
+    // took half the time of writing the 1000 runs
     for (i, p) in paths.iter().enumerate() {
-        let f = out.file(&format!(
-            "dataset/{}/groundtruthSync.txt",
-            sequence_name(i + 1)
-        ))?;
-        dataset_io::write_atomic(&f, p.ground_truth_sync().as_bytes())?;
+        out.write(
+            &format!("dataset/{}/groundtruthSync.txt", sequence_name(i + 1)),
+            p.ground_truth_sync().as_bytes(),
+        )?;
     }
     let mut jobs = Vec::new();
     for (mi, _) in cfg.methods.iter().enumerate() {
@@ -549,7 +551,7 @@ pub fn write_results(out: &OutputDir, a: &ResultsSpec, observer: &dyn Observer) 
                 sequence_name(s + 1),
                 if bwd { "bwd" } else { "fwd" }
             );
-            dataset_io::write_atomic(&out.file(&rel)?, text.as_bytes())?;
+            out.write(&rel, text.as_bytes())?;
             observer.advance(1);
             Ok(())
         });
