@@ -521,16 +521,10 @@ mod tests {
         // pixel, a pixel without an estimate, and the borders and corners in play
         let (w, h) = (40usize, 30usize);
         let sd = 1e-3;
-        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = synthetic::Rng::new(0x2545_f491_4f6c_dd1d);
         let mut noise = || {
             // the sum of four uniforms: close to normal, never beyond 3.5 sd
-            let mut s = 0.0;
-            for _ in 0..4 {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                s += (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-            }
+            let s: f64 = (0..4).map(|_| rng.uniform() - 0.5).sum();
             s * sd * 3.0f64.sqrt()
         };
         let mut v: Vec<f64> = (0..w * h)
