@@ -68,6 +68,7 @@
 
 use camera_model::Image;
 
+use crate::stats::median;
 use crate::{InverseResponse, PhotometricError, Vignette};
 
 /// Options of the exposure measurement, check and estimate.
@@ -639,22 +640,6 @@ fn refine(
         (dx, dy)
     } else {
         start
-    }
-}
-
-/// Median of a slice (reordered); NaN when empty.
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mid = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-    let m = *m;
-    if v.len() % 2 == 1 {
-        m
-    } else {
-        let lower = v[..mid].iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        0.5 * (lower + m)
     }
 }
 

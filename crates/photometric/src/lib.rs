@@ -36,6 +36,7 @@ mod noise;
 mod response;
 mod response_calib;
 mod smoothing;
+mod stats;
 mod vignette;
 mod vignette_calib;
 

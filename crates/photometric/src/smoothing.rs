@@ -14,6 +14,7 @@
 
 use rayon::prelude::*;
 
+use crate::stats::median;
 use crate::PhotometricError;
 
 /// Which smoothing was applied and why.
@@ -262,21 +263,6 @@ fn local_linear(
     (0..n).into_par_iter().with_min_len(4096).map(fit).unzip()
 }
 
-/// The median of `xs` (the mean of the two middle values of an even count), reordering
-/// them; `None` when empty.
-fn median(xs: &mut [f64]) -> Option<f64> {
-    let n = xs.len();
-    if n == 0 {
-        return None;
-    }
-    let (lower, &mut upper, _) = xs.select_nth_unstable_by(n / 2, f64::total_cmp);
-    if n % 2 == 1 {
-        return Some(upper);
-    }
-    let below = lower.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    Some(0.5 * (below + upper))
-}
-
 /// Side of the neighbourhood of [`find_defects`].
 const DEFECT_SIDE: usize = 2 * DEFECT_RADIUS + 1;
 
@@ -339,7 +325,7 @@ pub(crate) fn find_defects(w: usize, h: usize, raw: &[f64], wt: &[f64]) -> Vec<b
                         }
                     }
                     if n >= 3 {
-                        median(&mut buf[..n]).unwrap_or(0.0)
+                        median(&mut buf[..n])
                     } else {
                         0.0
                     }
@@ -359,9 +345,8 @@ pub(crate) fn find_defects(w: usize, h: usize, raw: &[f64], wt: &[f64]) -> Vec<b
                         }
                     }
                 }
-                let Some(reference) = median(&mut buf[..n]) else {
-                    continue;
-                };
+                // (at least four neighbours: never the NaN of no value)
+                let reference = median(&mut buf[..n]);
                 let z = (raw[i] - reference) * (wt[i] / 2.0).sqrt();
                 *flag = z.abs() > DEFECT_SIGMAS;
             }

@@ -113,8 +113,8 @@ fn in_marker(x: f64, y: f64) -> bool {
 /// Largest distance (marker widths, in x or y) of a sub-pixel's plane point from the four's
 /// mean for which one texture sample at the mean stands for the four: a fortieth of the
 /// finest octave's cell (0.2 marker widths), where the difference is ~2e-6 of the radiance
-/// (RMS; see the test). At the plane distances of the set (1.3 to 2.4 marker widths) the sub-pixel
-/// points are about 0.002 apart; only grazing views near the horizon exceed it.
+/// (RMS; see the test). At the plane distances of the set (1.3 to 2.4 marker widths) the
+/// sub-pixel points are about 0.002 apart; only grazing views near the horizon exceed it.
 const WALL_SPREAD: f64 = 0.005;
 
 /// The mean of four sub-pixel plane points when all are on the wall (off the marker) within
