@@ -283,14 +283,17 @@ pub fn response_value(u: &[f64], energy: f64) -> f64 {
 pub struct ResponseLookup<'a> {
     u: &'a [f64],
     /// `bins[j]`: the number of table entries at most `u[0] + j / scale`.
-    bins: Vec<usize>,
+    bins: Vec<u32>,
     scale: f64,
 }
 
 impl<'a> ResponseLookup<'a> {
     /// The index of the increasing table `u`.
     pub fn new(u: &'a [f64]) -> ResponseLookup<'a> {
-        let n = u.len().max(2);
+        // at least 4096 bins: for an 8-bit table, 16 bins per entry on average, so that the
+        // search below mostly looks at no entry or one (a third of the time of capturing a
+        // frame went into this search with one bin per entry)
+        let n = u.len().max(4096);
         let span = u[u.len() - 1] - u[0];
         let scale = if span > 0.0 && span.is_finite() {
             n as f64 / span
@@ -300,7 +303,7 @@ impl<'a> ResponseLookup<'a> {
         let bins = (0..=n + 1)
             .map(|j| {
                 let e = u[0] + j as f64 / scale;
-                u.partition_point(|&x| x <= e)
+                u.partition_point(|&x| x <= e) as u32
             })
             .collect();
         ResponseLookup { u, bins, scale }
@@ -338,7 +341,10 @@ impl<'a> ResponseLookup<'a> {
         // bins[j + 2] (one bin either side for the rounding of j)
         let last = self.bins.len() - 1;
         let j = (((energy - u[0]) * self.scale) as usize).min(last);
-        let (lo, hi) = (self.bins[j.saturating_sub(1)], self.bins[(j + 2).min(last)]);
+        let (lo, hi) = (
+            self.bins[j.saturating_sub(1)] as usize,
+            self.bins[(j + 2).min(last)] as usize,
+        );
         let k = (lo + u[lo..hi].partition_point(|&x| x <= energy)).clamp(1, top);
         let (a, b) = (u[k - 1], u[k]);
         (k - 1) as f64 + (energy - a) / (b - a)
