@@ -1,8 +1,7 @@
 //! Criterion benchmarks of the synthetic renderers' per-frame kernels: the sensor model alone
 //! (shot, read and ADC noise, the response, defects) on a precomputed textured energy image,
-//! and a whole
-//! 640x512 frame of the benchmark-like sequence (ray, room texture, vignette, sensor).
-//! Throughput is in pixels.
+//! and a whole 640x512 frame of the benchmark-like sequence (ray, room texture, vignette,
+//! sensor). Throughput is in pixels.
 #![allow(missing_docs, clippy::unwrap_used)]
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};

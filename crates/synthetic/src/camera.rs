@@ -291,8 +291,8 @@ impl<'a> ResponseLookup<'a> {
     /// The index of the increasing table `u`.
     pub fn new(u: &'a [f64]) -> ResponseLookup<'a> {
         // at least 4096 bins: for an 8-bit table, 16 bins per entry on average, so that the
-        // search below mostly looks at no entry or one (a third of the time of capturing a
-        // frame went into this search with one bin per entry)
+        // search below mostly looks at no entry or one (with one bin per entry, this search
+        // took a third of the sensor model's time per pixel)
         let n = u.len().max(4096);
         let span = u[u.len() - 1] - u[0];
         let scale = if span > 0.0 && span.is_finite() {
