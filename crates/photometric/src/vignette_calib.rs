@@ -1147,28 +1147,48 @@ impl PassCtx<'_, '_> {
         let wo = &mut out.wo[range.clone()];
         let wc = &mut out.wc[range.clone()];
         let ws = &mut out.w[range];
-        let mut count = 0u64;
+        // in four loops, so that the two without table lookups are vectorised: the
+        // lookups of C at the taps and of U; C there, its gradient, the prediction and its
+        // noise bin; the lookup of the variance; the weights and the sums
+        let mut taps = [[0.0f64; BATCH]; 4];
+        let mut obs = [0.0f64; BATCH];
         for j in 0..n {
             let a = (at[j] as usize).min(at_max);
+            taps[0][j] = c[a] as f64;
+            taps[1][j] = c[a + 1] as f64;
+            taps[2][j] = c[a + grid] as f64;
+            taps[3][j] = c[a + grid + 1] as f64;
+            obs[j] = u[(samples[j].into() as usize).min(u_last)];
+        }
+        let mut cqs = [0.0f64; BATCH];
+        let mut grad2s = [0.0f64; BATCH];
+        let mut bins = [0u32; BATCH];
+        for j in 0..n {
             let (fx, fy) = (fxs[j], fys[j]);
-            let c0 = c[a] as f64;
-            let c1 = c[a + 1] as f64;
-            let c2 = c[a + grid] as f64;
-            let c3 = c[a + grid + 1] as f64;
+            let (c0, c1, c2, c3) = (taps[0][j], taps[1][j], taps[2][j], taps[3][j]);
             let upper = c0 + (c1 - c0) * fx;
             let lower = c2 + (c3 - c2) * fx;
             let cq = upper + (lower - upper) * fy;
             let gx = (c1 - c0) * (1.0 - fy) + (c3 - c2) * fy;
             let gy = lower - upper;
-            let grad2 = gx * gx + gy * gy;
+            cqs[j] = cq;
+            grad2s[j] = gx * gx + gy * gy;
+            let pred = t * cq * v_ord[j];
+            bins[j] = tables.bin(pred) as u32;
+        }
+        let mut var = [0.0f64; BATCH];
+        for j in 0..n {
+            var[j] = tables.var[bins[j] as usize & (VAR_BINS - 1)];
+        }
+        let mut count = 0u64;
+        for j in 0..n {
+            let (fx, cq, obs) = (fxs[j], cqs[j], obs[j]);
             let vx = v_ord[j];
             let tv = t * vx;
             let tc = t * cq;
-            let obs = u[(samples[j].into() as usize).min(u_last)];
             let pred = tc * vx;
-            let bin = tables.bin(pred);
             // sensor noise plus the error a misregistration makes where C has edges
-            let vr = tables.var[bin] + tv * tv * grad2 * reg;
+            let vr = var[j] + tv * tv * grad2s[j] * reg;
             let r = obs - pred;
             // (observations where C is 0 count for the C step: it moves C from there)
             let kept = fx >= 0.0 && tv > 0.0 && cq >= 0.0 && !(reject && r * r > out2 * vr);
