@@ -7,54 +7,18 @@
 //! changes are the passes' cost. Run with `cargo bench -p photometric --bench vignette`.
 #![allow(missing_docs, clippy::unwrap_used)]
 
-use camera_model::{CameraFile, Image, ImageSize};
+#[path = "../tests/plane_frames.rs"]
+mod plane_frames;
+
+use camera_model::{CameraFile, ImageSize};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use photometric::{
-    calibrate_vignette, InverseResponse, PhotometricError, PlaneFrame, PlaneFrames, PlaneImage,
-    PlanePose, VignetteOptions,
-};
+use photometric::{calibrate_vignette, InverseResponse, VignetteOptions};
 use std::hint::black_box;
-use synthetic::plane::{PlaneConfig, PlaneSequence};
 use synthetic::sensor::{NoiseLevel, Sensor};
-
-/// The frames in memory with their true poses.
-struct Frames {
-    images: Vec<PlaneImage>,
-    seq: PlaneSequence,
-}
-
-impl PlaneFrames for Frames {
-    fn len(&self) -> usize {
-        self.images.len()
-    }
-    fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError> {
-        let p = self.seq.poses[i];
-        Ok(PlaneFrame {
-            image: self.images[i].clone(),
-            exposure_ms: self.seq.exposures_ms[i],
-            pose: PlanePose { r: p.r, t: p.t },
-        })
-    }
-}
 
 fn bench(c: &mut Criterion) {
     let (w, h, n) = (320, 256, 48);
-    let seq = PlaneSequence::new(
-        1,
-        PlaneConfig {
-            width: w,
-            height: h,
-            frames: n,
-            sensor: Sensor::preset(NoiseLevel::Typical),
-            ..PlaneConfig::default()
-        },
-    );
-    let frames = Frames {
-        images: (0..n)
-            .map(|i| Image::new(w, h, seq.frame(i).unwrap()).unwrap().into())
-            .collect(),
-        seq,
-    };
+    let frames = plane_frames::set(1, w, h, n, Sensor::preset(NoiseLevel::Typical));
     let cam = CameraFile::parse(&frames.seq.camera.camera_txt((w, h))).unwrap();
     let response = InverseResponse::new(frames.seq.response).unwrap();
     let options = VignetteOptions::default();

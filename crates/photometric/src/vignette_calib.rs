@@ -1178,6 +1178,8 @@ impl PassCtx<'_, '_> {
         }
         let mut var = [0.0f64; BATCH];
         for j in 0..n {
+            // (bins are at most VAR_BINS - 1, a power of two less one: the mask only
+            // spares the bounds check)
             var[j] = tables.var[bins[j] as usize & (VAR_BINS - 1)];
         }
         let mut count = 0u64;

@@ -5,6 +5,7 @@ mod correct;
 mod exposure;
 mod files;
 mod marker;
+mod plane_frames;
 mod response;
 mod response_deep;
 mod serde_types;

@@ -1,51 +1,12 @@
 //! Vignette calibration against synthetic marker-plane videos with known truth.
+use crate::plane_frames::{set, Frames};
 use camera_model::{CameraFile, Image, ImageSize};
 use photometric::{
-    calibrate_vignette, vignette_errors, InverseResponse, PhotometricError, PlaneFrame,
-    PlaneFrames, PlaneImage, PlanePose, VignetteCalibration, VignetteOptions,
+    calibrate_vignette, vignette_errors, InverseResponse, PhotometricError, PlaneImage,
+    VignetteCalibration, VignetteOptions,
 };
 use synthetic::plane::{PlaneConfig, PlaneSequence};
 use synthetic::sensor::{NoiseLevel, Sensor};
-
-/// Frames of a synthetic plane sequence (8-bit, or deeper samples in 16 bits) with their
-/// true poses.
-struct Frames {
-    images: Vec<PlaneImage>,
-    seq: PlaneSequence,
-}
-
-impl PlaneFrames for Frames {
-    fn len(&self) -> usize {
-        self.images.len()
-    }
-    fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError> {
-        let p = self.seq.poses[i];
-        Ok(PlaneFrame {
-            image: self.images[i].clone(),
-            exposure_ms: self.seq.exposures_ms[i],
-            pose: PlanePose { r: p.r, t: p.t },
-        })
-    }
-}
-
-fn set(seed: u64, w: usize, h: usize, n: usize, sensor: Sensor) -> Frames {
-    let seq = PlaneSequence::new(
-        seed,
-        PlaneConfig {
-            width: w,
-            height: h,
-            frames: n,
-            sensor,
-            ..PlaneConfig::default()
-        },
-    );
-    Frames {
-        images: (0..n)
-            .map(|i| Image::new(w, h, seq.frame(i).unwrap()).unwrap().into())
-            .collect(),
-        seq,
-    }
-}
 
 /// Calibrates with the sequence's true 8-bit response.
 fn calibrate(f: &Frames) -> Result<VignetteCalibration, PhotometricError> {
