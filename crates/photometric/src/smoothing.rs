@@ -104,9 +104,9 @@ fn box_cols(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
 
 /// Three box passes in each direction: a kernel close to a Gaussian of `sigma_of_radius(r)`
 /// (unnormalised: the sums are ratios of smoothed images).
-fn blur(src: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
-    let mut a = src.to_vec();
-    let mut b = vec![0.0f64; src.len()];
+fn blur(src: Vec<f64>, w: usize, h: usize, r: usize) -> Vec<f64> {
+    let mut a = src;
+    let mut b = vec![0.0f64; a.len()];
     for _ in 0..3 {
         box_rows(&a, w, h, r, &mut b);
         std::mem::swap(&mut a, &mut b);
@@ -129,138 +129,186 @@ fn local_linear(
     r: usize,
     variance: bool,
 ) -> (Vec<f64>, Vec<f64>) {
+    local_linear_many(&[(v, variance)], wt, w, h, r)
+        .pop()
+        .unwrap_or_default()
+}
+
+/// [`local_linear`] of several maps with the same weights and radius (each with whether its
+/// variance is asked), in one parallel batch of blurs: maps with the same pixels missing
+/// share the blurs of the weights' moments (the maps of the odd and of the even frames
+/// mostly do), so that only the three moments of their values are blurred for each. The
+/// same numbers as one [`local_linear`] per map.
+fn local_linear_many(
+    maps: &[(&[f64], bool)],
+    wt: &[f64],
+    w: usize,
+    h: usize,
+    r: usize,
+) -> Vec<(Vec<f64>, Vec<f64>)> {
     let n = w * h;
     if r == 0 {
-        let var = (0..n)
-            .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
+        return maps
+            .iter()
+            .map(|(v, _)| {
+                let var = (0..n)
+                    .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
+                    .collect();
+                (v.to_vec(), var)
+            })
             .collect();
-        return (v.to_vec(), var);
     }
     let s = (w.max(h) as f64) / 2.0;
     let xs = |i: usize| ((i % w) as f64 - w as f64 / 2.0) / s;
     let ys = |i: usize| ((i / w) as f64 - h as f64 / 2.0) / s;
-    let wv: Vec<f64> = (0..n)
-        .map(|i| if v[i].is_finite() { wt[i] } else { 0.0 })
-        .collect();
-    let val: Vec<f64> = (0..n)
-        .map(|i| if v[i].is_finite() { v[i] } else { 0.0 })
-        .collect();
-    // the moment images, blurred in parallel (each blur is sequential)
-    type Moment<'m> = (usize, &'m (dyn Fn(usize) -> f64 + Sync));
-    let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
-    let m_s0 = |i: usize| wv[i];
-    let m_sx = |i: usize| wv[i] * xs(i);
-    let m_sy = |i: usize| wv[i] * ys(i);
-    let m_sxx = |i: usize| wv[i] * xs(i) * xs(i);
-    let m_sxy = |i: usize| wv[i] * xs(i) * ys(i);
-    let m_syy = |i: usize| wv[i] * ys(i) * ys(i);
-    let m_sv = |i: usize| wv[i] * val[i];
-    let m_svx = |i: usize| wv[i] * val[i] * xs(i);
-    let m_svy = |i: usize| wv[i] * val[i] * ys(i);
-    let mut moments: Vec<Moment<'_>> = vec![
-        (r, &m_s0),
-        (r, &m_sx),
-        (r, &m_sy),
-        (r, &m_sxx),
-        (r, &m_sxy),
-        (r, &m_syy),
-        (r, &m_sv),
-        (r, &m_svx),
-        (r, &m_svy),
-    ];
-    // for the variance: the same moments with the squared kernel, a kernel of sigma / sqrt 2
-    // scaled by 1 / (4 pi sigma^2) relative to a unit-sum kernel
-    if variance {
-        moments.extend_from_slice(&[
-            (r2, &m_s0),
-            (r2, &m_sx),
-            (r2, &m_sy),
-            (r2, &m_sxx),
-            (r2, &m_sxy),
-            (r2, &m_syy),
-        ]);
-    }
-    let mut blurred: Vec<Vec<f64>> = moments
-        .par_iter()
-        .map(|&(radius, f)| {
-            let src: Vec<f64> = (0..n).map(f).collect();
-            blur(&src, w, h, radius)
-        })
-        .collect();
-    let q = blurred.split_off(9.min(blurred.len()));
-    let (s0, sx, sy, sxx, sxy, syy, sv, svx, svy) = match &blurred[..] {
-        [s0, sx, sy, sxx, sxy, syy, sv, svx, svy] => (s0, sx, sy, sxx, sxy, syy, sv, svx, svy),
-        _ => return (vec![f64::NAN; n], vec![f64::NAN; n]),
-    };
-    let (q0, qx, qy, qxx, qxy, qyy, norm2) = match &q[..] {
-        [q0, qx, qy, qxx, qxy, qyy] => {
-            // kernel sums: sum K = (2r+1)^6, sum K2 (the r2 kernel) = (2 r2 + 1)^6; the
-            // squared unit-sum kernel sums to 1 / (4 pi sigma^2)
-            let sum_k = ((2 * r + 1) as f64).powi(6);
-            let sum_k2 = ((2 * r2 + 1) as f64).powi(6);
-            let sig = sigma_of_radius(r);
-            let factor = sum_k * sum_k / (4.0 * std::f64::consts::PI * sig * sig) / sum_k2;
-            (
-                &q0[..],
-                &qx[..],
-                &qy[..],
-                &qxx[..],
-                &qxy[..],
-                &qyy[..],
-                factor,
-            )
-        }
-        _ => (&[][..], &[][..], &[][..], &[][..], &[][..], &[][..], 0.0),
-    };
-    // each pixel's weighted plane fit (in parallel over the pixels)
-    let fit = |i: usize| -> (f64, f64) {
-        if s0[i] <= 0.0 {
-            return (f64::NAN, f64::NAN);
-        }
-        let (xp, yp) = (xs(i), ys(i));
-        let a01 = sx[i] - xp * s0[i];
-        let a02 = sy[i] - yp * s0[i];
-        let a11 = sxx[i] - 2.0 * xp * sx[i] + xp * xp * s0[i];
-        let a12 = sxy[i] - xp * sy[i] - yp * sx[i] + xp * yp * s0[i];
-        let a22 = syy[i] - 2.0 * yp * sy[i] + yp * yp * s0[i];
-        let m = nalgebra::Matrix3::new(s0[i], a01, a02, a01, a11, a12, a02, a12, a22);
-        let b = nalgebra::Vector3::new(sv[i], svx[i] - xp * sv[i], svy[i] - yp * sv[i]);
-        // a plane needs the neighbourhood to spread in both directions; else a constant
-        let det = m.determinant();
-        let scale = s0[i] * a11.abs().max(1e-300) * a22.abs().max(1e-300);
-        let inv = if det > 1e-9 * scale {
-            m.try_inverse()
-        } else {
-            None
-        };
-        match inv {
-            Some(mi) => {
-                let out = (mi * b)[0];
-                if variance {
-                    let c01 = qx[i] - xp * q0[i];
-                    let c02 = qy[i] - yp * q0[i];
-                    let c11 = qxx[i] - 2.0 * xp * qx[i] + xp * xp * q0[i];
-                    let c12 = qxy[i] - xp * qy[i] - yp * qx[i] + xp * yp * q0[i];
-                    let c22 = qyy[i] - 2.0 * yp * qy[i] + yp * yp * q0[i];
-                    let q = nalgebra::Matrix3::new(q0[i], c01, c02, c01, c11, c12, c02, c12, c22)
-                        * norm2;
-                    let e = mi.row(0);
-                    (out, (e * q * e.transpose())[(0, 0)].max(0.0))
-                } else {
-                    (out, f64::NAN)
-                }
+    // (the same coordinates by column and by row, for the moment images)
+    let xcol: Vec<f64> = (0..w).map(xs).collect();
+    let yrow: Vec<f64> = (0..h).map(|y| ys(y * w)).collect();
+    // each map's weights (0 where it is missing), and the group of maps with the same
+    let mut groups: Vec<(Vec<f64>, bool)> = Vec::new();
+    let mut group_of = Vec::with_capacity(maps.len());
+    for &(v, variance) in maps {
+        let wv: Vec<f64> = (0..n)
+            .map(|i| if v[i].is_finite() { wt[i] } else { 0.0 })
+            .collect();
+        let same =
+            |g: &(Vec<f64>, bool)| g.0.iter().zip(&wv).all(|(a, b)| a.to_bits() == b.to_bits());
+        match groups.iter().position(same) {
+            Some(k) => {
+                groups[k].1 |= variance;
+                group_of.push(k);
             }
             None => {
-                let out = sv[i] / s0[i];
-                if variance {
-                    (out, q0[i] * norm2 / (s0[i] * s0[i]))
-                } else {
-                    (out, f64::NAN)
-                }
+                groups.push((wv, variance));
+                group_of.push(groups.len() - 1);
             }
         }
+    }
+    // for the variance: the weights' moments with the squared kernel, a kernel of
+    // sigma / sqrt 2 scaled by 1 / (4 pi sigma^2) relative to a unit-sum kernel
+    let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
+    // the blurs: per group, the six moments of the weights (1, x, y, xx, xy, yy) at r (and
+    // at r2 for the variance); per map, the three of its values (1, x, y)
+    #[derive(Clone, Copy)]
+    enum Src {
+        Weights(usize, usize, usize),
+        Values(usize, usize),
+    }
+    let mut tasks = Vec::new();
+    for (k, g) in groups.iter().enumerate() {
+        tasks.extend((0..6).map(|m| Src::Weights(k, m, r)));
+        if g.1 {
+            tasks.extend((0..6).map(|m| Src::Weights(k, m, r2)));
+        }
+    }
+    tasks.extend((0..maps.len()).flat_map(|j| (0..3).map(move |m| Src::Values(j, m))));
+    let moment = |src: Src| -> Vec<f64> {
+        let mut out = vec![0.0f64; n];
+        let (wv, val, m) = match src {
+            Src::Weights(k, m, _) => (&groups[k].0, None, m),
+            Src::Values(j, m) => (&groups[group_of[j]].0, Some(maps[j].0), m),
+        };
+        for (y, row) in out.chunks_mut(w.max(1)).enumerate() {
+            let yv = yrow[y];
+            for (x, o) in row.iter_mut().enumerate() {
+                let i = y * w + x;
+                let (a, xv) = (wv[i], xcol[x]);
+                *o = match val {
+                    None => match m {
+                        0 => a,
+                        1 => a * xv,
+                        2 => a * yv,
+                        3 => a * xv * xv,
+                        4 => a * xv * yv,
+                        _ => a * yv * yv,
+                    },
+                    Some(v) => {
+                        let vi = if v[i].is_finite() { v[i] } else { 0.0 };
+                        match m {
+                            0 => a * vi,
+                            1 => a * vi * xv,
+                            _ => a * vi * yv,
+                        }
+                    }
+                };
+            }
+        }
+        out
     };
-    (0..n).into_par_iter().with_min_len(4096).map(fit).unzip()
+    let blurred: Vec<Vec<f64>> = tasks
+        .par_iter()
+        .map(|&src| {
+            let radius = match src {
+                Src::Weights(_, _, radius) => radius,
+                Src::Values(..) => r,
+            };
+            blur(moment(src), w, h, radius)
+        })
+        .collect();
+    // where each group's blurs and each map's are in `blurred`
+    let mut first = Vec::with_capacity(groups.len());
+    let mut at = 0;
+    for g in &groups {
+        first.push(at);
+        at += if g.1 { 12 } else { 6 };
+    }
+    // kernel sums: sum K = (2r+1)^6, sum K2 (the r2 kernel) = (2 r2 + 1)^6; the squared
+    // unit-sum kernel sums to 1 / (4 pi sigma^2)
+    let sum_k = ((2 * r + 1) as f64).powi(6);
+    let sum_k2 = ((2 * r2 + 1) as f64).powi(6);
+    let sig = sigma_of_radius(r);
+    let norm2 = sum_k * sum_k / (4.0 * std::f64::consts::PI * sig * sig) / sum_k2;
+    maps.iter()
+        .enumerate()
+        .map(|(j, &(_, variance))| {
+            let gw = &blurred[first[group_of[j]]..];
+            let gv = &blurred[at + 3 * j..];
+            let (s0, sx, sy, sxx, sxy, syy) = (&gw[0], &gw[1], &gw[2], &gw[3], &gw[4], &gw[5]);
+            let (sv, svx, svy) = (&gv[0], &gv[1], &gv[2]);
+            let q = if variance { &gw[6..12] } else { &[] };
+            // each pixel's weighted plane fit (in parallel over the pixels)
+            let fit = |i: usize| -> (f64, f64) {
+                if s0[i] <= 0.0 {
+                    return (f64::NAN, f64::NAN);
+                }
+                let (xp, yp) = (xs(i), ys(i));
+                let a01 = sx[i] - xp * s0[i];
+                let a02 = sy[i] - yp * s0[i];
+                let a11 = sxx[i] - 2.0 * xp * sx[i] + xp * xp * s0[i];
+                let a12 = sxy[i] - xp * sy[i] - yp * sx[i] + xp * yp * s0[i];
+                let a22 = syy[i] - 2.0 * yp * sy[i] + yp * yp * s0[i];
+                let m = nalgebra::Matrix3::new(s0[i], a01, a02, a01, a11, a12, a02, a12, a22);
+                let b = nalgebra::Vector3::new(sv[i], svx[i] - xp * sv[i], svy[i] - yp * sv[i]);
+                // a plane needs the neighbourhood to spread in both directions; else a
+                // constant
+                let det = m.determinant();
+                let scale = s0[i] * a11.abs().max(1e-300) * a22.abs().max(1e-300);
+                let inv = if det > 1e-9 * scale {
+                    m.try_inverse()
+                } else {
+                    None
+                };
+                match (inv, q) {
+                    (Some(mi), [q0, qx, qy, qxx, qxy, qyy]) => {
+                        let c01 = qx[i] - xp * q0[i];
+                        let c02 = qy[i] - yp * q0[i];
+                        let c11 = qxx[i] - 2.0 * xp * qx[i] + xp * xp * q0[i];
+                        let c12 = qxy[i] - xp * qy[i] - yp * qx[i] + xp * yp * q0[i];
+                        let c22 = qyy[i] - 2.0 * yp * qy[i] + yp * yp * q0[i];
+                        let q =
+                            nalgebra::Matrix3::new(q0[i], c01, c02, c01, c11, c12, c02, c12, c22)
+                                * norm2;
+                        let e = mi.row(0);
+                        ((mi * b)[0], (e * q * e.transpose())[(0, 0)].max(0.0))
+                    }
+                    (Some(mi), _) => ((mi * b)[0], f64::NAN),
+                    (None, [q0, ..]) => (sv[i] / s0[i], q0[i] * norm2 / (s0[i] * s0[i])),
+                    (None, _) => (sv[i] / s0[i], f64::NAN),
+                }
+            };
+            (0..n).into_par_iter().with_min_len(4096).map(fit).unzip()
+        })
+        .collect()
 }
 
 /// Side of the neighbourhood of [`find_defects`].
@@ -395,8 +443,9 @@ pub(crate) fn choose_smoothing(
             // of threads)
             let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
             let score_of = |r: usize| -> (usize, f64, f64) {
-                let (so, _) = local_linear(odd, &wt, w, h, r, false);
-                let (se, _) = local_linear(even, &wt, w, h, r, false);
+                let mut halves = local_linear_many(&[(odd, false), (even, false)], &wt, w, h, r);
+                let (se, _) = halves.pop().unwrap_or_default();
+                let (so, _) = halves.pop().unwrap_or_default();
                 let (mut s, mut s2, mut cnt) = (0.0, 0.0, 0.0);
                 for i in 0..n {
                     if odd[i].is_finite() && even[i].is_finite() && wt[i] > 0.0 {
@@ -451,18 +500,29 @@ pub(crate) fn choose_smoothing(
             (radius_for_sigma(s_half * 2f64.powf(-1.0 / 6.0)), true)
         }
     };
-    let (mut smoothed, mut var) = local_linear(raw, &wt, w, h, radius, true);
+    // the map, and the halves smoothed as the whole is (for the variance's scale and the
+    // bias below)
+    let mut batch = if radius > 0 {
+        local_linear_many(
+            &[(raw, true), (odd, false), (even, false)],
+            &wt,
+            w,
+            h,
+            radius,
+        )
+    } else {
+        local_linear_many(&[(raw, true)], &wt, w, h, radius)
+    };
+    let halves = (batch.len() == 3).then(|| {
+        let (se, _) = batch.pop().unwrap_or_default();
+        let (so, _) = batch.pop().unwrap_or_default();
+        (so, se)
+    });
+    let (mut smoothed, mut var) = batch.pop().unwrap_or_default();
     // the variance above treats pixels as independent; JPEG's 8x8 blocks and the shared
     // plane irradiance correlate neighbours. The same smoothing of the odd and of the even
     // half differs by noise alone: its spread calibrates the smoothed map's variance
     // (each half has about twice the variance of the whole: four times for the difference)
-    // the halves smoothed as the whole is (for the variance's scale and the bias below)
-    let halves = (radius > 0).then(|| {
-        (
-            local_linear(odd, &wt, w, h, radius, false).0,
-            local_linear(even, &wt, w, h, radius, false).0,
-        )
-    });
     if let Some((so, se)) = &halves {
         let (mut num, mut den) = (0.0, 0.0);
         for i in 0..n {
@@ -484,8 +544,16 @@ pub(crate) fn choose_smoothing(
     // (that difference still carries some noise, measured by the same difference of the odd
     // and of the even half and taken out; the squared bias is averaged over the kernel)
     if let Some((so, se)) = &halves {
-        let again = |m: &[f64]| local_linear(m, &wt, w, h, radius, false).0;
-        let (tf, to, te) = (again(&smoothed), again(so), again(se));
+        let mut again = local_linear_many(
+            &[(&smoothed, false), (so, false), (se, false)],
+            &wt,
+            w,
+            h,
+            radius,
+        );
+        let (te, _) = again.pop().unwrap_or_default();
+        let (to, _) = again.pop().unwrap_or_default();
+        let (tf, _) = again.pop().unwrap_or_default();
         let b2: Vec<f64> = (0..n)
             .map(|i| {
                 let d = tf[i] - smoothed[i];
@@ -498,7 +566,7 @@ pub(crate) fn choose_smoothing(
             })
             .collect();
         // (blur sums over its kernel: (2r+1)^2 per box pass, three passes)
-        let b2 = blur(&b2, w, h, radius);
+        let b2 = blur(b2, w, h, radius);
         let norm = ((2 * radius + 1) as f64).powi(6);
         for (v, b) in var.iter_mut().zip(&b2) {
             *v += (b / norm).max(0.0);

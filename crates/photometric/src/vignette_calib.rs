@@ -1208,8 +1208,8 @@ impl PassCtx<'_, '_> {
     }
 
     /// The C step's share of one frame's observations `d[slot .. slot + n]` (exposure `t`)
-    /// with the new `V` of their block (`new_v`, by position in the block), handed to
-    /// `splats` (which adds them to `cacc` band by band).
+    /// with the new `V` of their block (`new_v`, by position in the block; the C visit's
+    /// `V` as it is), handed to `splats` (which adds them to `cacc` band by band).
     #[allow(clippy::too_many_arguments)]
     fn splat_dense(
         &self,
@@ -1656,9 +1656,9 @@ fn store_pass(
     let mut total = VSums::new(npx, levels);
     let mut num_total = vec![0.0f64; cells_needed];
     let mut den_total = vec![0.0f64; cells_needed];
-    // without the statistics, the V step's branch-free kernel ([`PassCtx::dense`]), which
-    // reads V in the visiting order
-    let dense_path = visit != Visit::C && !stats;
+    // without the statistics, the branch-free kernel ([`PassCtx::dense`]), which reads V in
+    // the visiting order (the C visit splats its observations with that V)
+    let dense_path = !stats;
     let v_ord: Vec<f64> = if dense_path {
         p.order.iter().map(|&q| model.v[q as usize]).collect()
     } else {
@@ -1701,7 +1701,7 @@ fn store_pass(
                 Dense::with_views(1)
             };
             let mut splats = Splats::new(
-                if dense_path && visit == Visit::Fused {
+                if dense_path && visit != Visit::V {
                     cells_needed
                 } else {
                     0
@@ -1740,6 +1740,14 @@ fn store_pass(
                                 ctx.dense(geom, d, block.clone(), v_blk, nb, db, &mut dense, slot)
                             }
                         };
+                        if visit == Visit::C {
+                            // the C step with V as it is: the view's splats at once
+                            let t = geom.exposure_ms;
+                            ctx.splat_dense(&dense, 0, len, t, v_blk, &mut splats, &mut acc.cacc);
+                        }
+                    }
+                    if visit == Visit::C {
+                        continue;
                     }
                     for (j, &q) in p.order[block.clone()].iter().enumerate() {
                         let a = q as usize - start;
