@@ -688,6 +688,24 @@ struct PassCtx<'a, 'p> {
     step: Step,
     /// Whether the V step takes the statistics too (see [`PassCtx::v_sums`]).
     stats: bool,
+    /// Whether the kernels run with 256-bit vectors (see [`wide_vectors`]).
+    wide: bool,
+}
+
+/// Whether the passes' kernels ([`PassCtx::dense`], [`PassCtx::stages`]) run compiled for
+/// AVX2: four `f64` to a vector instead of two, the same operations in the same order (no
+/// fused multiply-add), so the same results to the bit, faster where the arithmetic is the
+/// bound (the plane positions, about twice). On when the CPU has AVX2, unless the
+/// environment variable `MONOVO_NO_AVX2` is set (to compare, or to rule it out).
+fn wide_vectors() -> bool {
+    static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *WIDE.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        avx2 && std::env::var_os("MONOVO_NO_AVX2").is_none()
+    })
 }
 
 /// The sums of one job: the V step's per pixel, or the C step's per cell (numerator and
@@ -714,19 +732,8 @@ impl<S: Copy + Into<u16>> SampleSource for RowMajor<'_, S> {
     }
 }
 
-/// A block's samples from the store: by position.
-#[derive(Clone, Copy)]
-struct InBlock<'a, S>(&'a [S]);
-
-impl<S: Copy + Into<u16>> SampleSource for InBlock<'_, S> {
-    #[inline]
-    fn sample(self, j: usize, _px: u32) -> u16 {
-        self.0[j].into()
-    }
-}
-
 /// The splats of the C step visit the observations of a batch this many apart (see
-/// [`PassCtx::splat_kept`]).
+/// [`PassCtx::splat_dense`]).
 const SPLAT_STRIDE: usize = 4;
 
 /// Observations per batch of a pass's stages.
@@ -789,6 +796,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             top: p.top(),
             step,
             stats,
+            wide: wide_vectors(),
         }
     }
 
@@ -807,8 +815,8 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             self.stages(pf, RowMajor(data), start..(start + BATCH).min(block.end), b);
             // stage 4: the weighted residuals into the sums
             match self.step {
-                Step::V if self.stats => self.v_sums::<true>(i, pf, b, &mut acc.v, 0, None),
-                Step::V => self.v_sums::<false>(i, pf, b, &mut acc.v, 0, None),
+                Step::V if self.stats => self.v_sums::<true>(i, pf, b, &mut acc.v, 0),
+                Step::V => self.v_sums::<false>(i, pf, b, &mut acc.v, 0),
                 Step::C => self.c_sums(pf, b, acc),
             }
         }
@@ -817,6 +825,38 @@ impl<'a, 'p> PassCtx<'a, 'p> {
     /// Stages 1 to 3 of the observations of frame `pf` at the pixels `chunk` (at most
     /// [`BATCH`] positions in the problem's sample) into `b`.
     fn stages<S: SampleSource>(
+        &self,
+        pf: &Geom,
+        data: S,
+        ks: std::ops::Range<usize>,
+        b: &mut Batch,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            // SAFETY: `wide` is true only on a CPU with AVX2 (see `wide_vectors`), the one
+            // requirement of calling a function compiled for it
+            #[allow(unsafe_code)]
+            return unsafe { self.stages_avx2(pf, data, ks, b) };
+        }
+        self.stages_body(pf, data, ks, b)
+    }
+
+    /// [`PassCtx::stages`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn stages_avx2<S: SampleSource>(
+        &self,
+        pf: &Geom,
+        data: S,
+        ks: std::ops::Range<usize>,
+        b: &mut Batch,
+    ) {
+        self.stages_body(pf, data, ks, b)
+    }
+
+    /// The body of [`PassCtx::stages`] (inlined into both of its builds).
+    #[inline(always)]
+    fn stages_body<S: SampleSource>(
         &self,
         pf: &Geom,
         data: S,
@@ -889,8 +929,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
     /// The V step's sums of a batch.
     /// `vs` holds the pixels from position `offset` on. With `STATS`, also the per-pixel
     /// counts, the odd frames' sums and the residual statistics (the noise model's fit and
-    /// the result need them; the iterations with a fixed noise model do not). With `keep`,
-    /// the observations that the C step takes are appended there.
+    /// the result need them; the iterations with a fixed noise model do not).
     fn v_sums<const STATS: bool>(
         &self,
         i: usize,
@@ -898,7 +937,6 @@ impl<'a, 'p> PassCtx<'a, 'p> {
         b: &Batch,
         vs: &mut VSums,
         offset: usize,
-        mut keep: Option<&mut Vec<Kept>>,
     ) {
         let (model, tables, u) = (self.model, self.tables, self.p.u);
         let t = pf.exposure_ms;
@@ -928,17 +966,6 @@ impl<'a, 'p> PassCtx<'a, 'p> {
                 continue;
             }
             let w = 1.0 / vr;
-            if let Some(kept) = keep.as_mut() {
-                let [fx, fy] = b.frac[j];
-                kept.push(Kept {
-                    at: b.idx[j][0],
-                    wo: (w * obs) as f32,
-                    wc: (w * cq) as f32,
-                    w: w as f32,
-                    frac: [(fx * FRAC_ONE + 0.5) as u16, (fy * FRAC_ONE + 0.5) as u16],
-                    px: px as u32,
-                });
-            }
             if cq == 0.0 {
                 continue;
             }
@@ -958,37 +985,6 @@ impl<'a, 'p> PassCtx<'a, 'p> {
                 let kp = tables.grey[bin] as usize;
                 vs.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
                 vs.rcnt[kp] += 1.0;
-            }
-        }
-    }
-
-    /// The C step's share of kept observations of one frame (exposure `t`), with the new
-    /// `V` of their block (`new_v`, indexed by [`Kept::px`]).
-    fn splat_kept(&self, kept: &[Kept], t: f64, new_v: &[f64], cacc: &mut [[f32; 2]]) {
-        let unit = 1.0 / FRAC_ONE as f32;
-        // neighbouring observations share taps: visited a few apart, consecutive updates of
-        // one cell do not wait on each other
-        let interleaved = (0..SPLAT_STRIDE).flat_map(|s| kept.iter().skip(s).step_by(SPLAT_STRIDE));
-        for o in interleaved {
-            let tv = t * new_v[o.px as usize];
-            // (a NaN V fails too)
-            if tv.is_nan() || tv <= 0.0 {
-                continue;
-            }
-            // w tV r and w tV^2, with r = U - tV C
-            let num = (tv * (o.wo as f64 - tv * o.wc as f64)) as f32;
-            let den = (o.w as f64 * tv * tv) as f32;
-            let (fx, fy) = (o.frac[0] as f32 * unit, o.frac[1] as f32 * unit);
-            let wt = [
-                (1.0 - fx) * (1.0 - fy),
-                fx * (1.0 - fy),
-                (1.0 - fx) * fy,
-                fx * fy,
-            ];
-            for (at, wt) in taps(o.at as usize, self.p.grid).into_iter().zip(wt) {
-                let c = &mut cacc[at];
-                c[0] += wt * num;
-                c[1] += wt * den;
             }
         }
     }
@@ -1073,14 +1069,45 @@ impl Dense {
     }
 }
 
+/// The V step's sums of one block by position in it (the statistics' too, in a pass that
+/// takes them).
+struct BlockSums {
+    num: Vec<f64>,
+    den: Vec<f64>,
+    num_odd: Vec<f64>,
+    den_odd: Vec<f64>,
+    counts: Vec<u32>,
+}
+
+impl BlockSums {
+    fn new() -> BlockSums {
+        BlockSums {
+            num: vec![0.0; BATCH],
+            den: vec![0.0; BATCH],
+            num_odd: vec![0.0; BATCH],
+            den_odd: vec![0.0; BATCH],
+            counts: vec![0; BATCH],
+        }
+    }
+
+    /// Zero for the next block.
+    fn clear(&mut self) {
+        self.num.fill(0.0);
+        self.den.fill(0.0);
+        self.num_odd.fill(0.0);
+        self.den_odd.fill(0.0);
+        self.counts.fill(0);
+    }
+}
+
 impl PassCtx<'_, '_> {
     /// The V step's sums of one block (`ks`, positions of the order) of one frame (`pf`,
-    /// its samples `samples` in the block's order) without the statistics, into `num` and
-    /// `den` (by position in the block); the observations go to `out` from `slot` on (one
-    /// entry per position). Returns the number of observations. The same sums as
-    /// [`PassCtx::stages`] and [`PassCtx::v_sums`], written without branches so that the
-    /// compiler vectorises them: every position is computed, and one without an
-    /// observation weighs 0.
+    /// its samples `samples` in the block's order) into `blk` (by position in the block),
+    /// with `stats` (the pass's sums, and whether the frame is odd) also the statistics; the
+    /// observations go to `out` from `slot` on (one entry per position). Returns the number
+    /// of observations. The same sums as [`PassCtx::stages`] and [`PassCtx::v_sums`], the
+    /// V step's written without branches so that the compiler vectorises them: every
+    /// position is computed, and one without an observation weighs 0.
     #[allow(clippy::too_many_arguments)]
     fn dense<S: Copy + Into<u16>>(
         &self,
@@ -1088,8 +1115,50 @@ impl PassCtx<'_, '_> {
         samples: &[S],
         ks: std::ops::Range<usize>,
         v_ord: &[f64],
-        num: &mut [f64],
-        den: &mut [f64],
+        blk: &mut BlockSums,
+        stats: Option<(&mut VSums, bool)>,
+        out: &mut Dense,
+        slot: usize,
+    ) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            // SAFETY: `wide` is true only on a CPU with AVX2 (see `wide_vectors`), the one
+            // requirement of calling a function compiled for it
+            #[allow(unsafe_code)]
+            return unsafe { self.dense_avx2(pf, samples, ks, v_ord, blk, stats, out, slot) };
+        }
+        self.dense_body(pf, samples, ks, v_ord, blk, stats, out, slot)
+    }
+
+    /// [`PassCtx::dense`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(clippy::too_many_arguments)]
+    fn dense_avx2<S: Copy + Into<u16>>(
+        &self,
+        pf: &Geom,
+        samples: &[S],
+        ks: std::ops::Range<usize>,
+        v_ord: &[f64],
+        blk: &mut BlockSums,
+        stats: Option<(&mut VSums, bool)>,
+        out: &mut Dense,
+        slot: usize,
+    ) -> u64 {
+        self.dense_body(pf, samples, ks, v_ord, blk, stats, out, slot)
+    }
+
+    /// The body of [`PassCtx::dense`] (inlined into both of its builds).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn dense_body<S: Copy + Into<u16>>(
+        &self,
+        pf: &Geom,
+        samples: &[S],
+        ks: std::ops::Range<usize>,
+        v_ord: &[f64],
+        blk: &mut BlockSums,
+        stats: Option<(&mut VSums, bool)>,
         out: &mut Dense,
         slot: usize,
     ) -> u64 {
@@ -1101,7 +1170,8 @@ impl PassCtx<'_, '_> {
         let [rx, ry, rz] = &p.ordered_rays;
         let (rx, ry, rz) = (&rx[ks.clone()], &ry[ks.clone()], &rz[ks]);
         let samples = &samples[..n];
-        let (v_ord, num, den) = (&v_ord[..n], &mut num[..n], &mut den[..n]);
+        let v_ord = &v_ord[..n];
+        let (num, den) = (&mut blk.num[..n], &mut blk.den[..n]);
         let range = slot..slot + n;
         let at = &mut out.at[range.clone()];
         let fxs = &mut out.fx[range.clone()];
@@ -1203,6 +1273,42 @@ impl PassCtx<'_, '_> {
             num[j] += wtc * obs;
             den[j] += wtc * tc;
             count += (wsum > 0.0) as u64;
+        }
+        // the statistics (the noise model's fit and the result need them): the same
+        // observations again, one by one (the odd frame's sums, the counts, the outliers and
+        // the residuals, whose histogram by grey value is a scatter)
+        let Some((vs, odd)) = stats else {
+            return count;
+        };
+        for j in 0..n {
+            let (fx, cq, obs) = (fxs[j], cqs[j], obs[j]);
+            let vx = v_ord[j];
+            let tv = t * vx;
+            if !(fx >= 0.0 && tv > 0.0 && cq > 0.0) {
+                continue;
+            }
+            let tc = t * cq;
+            let pred = tc * vx;
+            let vr = var[j] + tv * tv * grad2s[j] * reg;
+            let r = obs - pred;
+            if reject && r * r > out2 * vr {
+                vs.outliers += 1;
+                continue;
+            }
+            let w = 1.0 / vr;
+            let wtc = w * tc;
+            if odd {
+                blk.num_odd[j] += wtc * obs;
+                blk.den_odd[j] += wtc * tc;
+            }
+            blk.counts[j] += 1;
+            vs.chi2 += r * r * w;
+            vs.pred2 += pred * pred;
+            vs.res2 += r * r;
+            let bin = bins[j] as usize & (VAR_BINS - 1);
+            let kp = tables.grey[bin] as usize;
+            vs.rss[kp] += (r * tables.inv_slope[bin]).powi(2);
+            vs.rcnt[kp] += 1.0;
         }
         count
     }
@@ -1350,29 +1456,6 @@ impl Splats {
         lo.min(hi)..hi.min(cacc.len())
     }
 }
-
-/// An observation kept by the fused iteration for its C step (24 bytes: a block's kept
-/// observations stay in the core's cache).
-///
-/// Its weight and whether it is an outlier are those of the V step, with the `V` before the
-/// step: the C step's own (with the new `V`) differ by the step's change, and both are the
-/// same at the solution.
-struct Kept {
-    /// The storage index of the first bilinear tap (the others follow from it).
-    at: u32,
-    /// The weight times `U` of the sample, times `C` at the position, and the weight.
-    wo: f32,
-    wc: f32,
-    w: f32,
-    /// The pixel's position in the job's sums.
-    px: u32,
-    /// The fractions of the position between the taps, in units of 1 / [`FRAC_ONE`].
-    frac: [u16; 2],
-}
-
-/// The unit of [`Kept::frac`]: fractions of a cell to 1 / 65536 (a hundred-thousandth of a
-/// pixel on the plane; the bilinear weights of the C step to 2e-5).
-const FRAC_ONE: f64 = 65535.0;
 
 /// A frame with a plane pose as the passes over the store see it: its number and what the
 /// passes need of it.
@@ -1610,7 +1693,8 @@ enum Visit {
     /// there), and its observations, kept, give their share of the C step with the block's
     /// new `V`. The sums of a V pass followed by a C pass with the new `V`, at the cost of
     /// one pass, but for two things: the C step weighs the observations and drops outliers
-    /// as the V step did (the same at the solution; see [`Kept`]), and it is done with the
+    /// as the V step did, with the `V` before the step (the C step's own, with the new `V`,
+    /// differ by the step's change: the same at the solution), and it is done with the
     /// V step's `V` before the gauge is fixed (the same `C` up to the gauge's scale: `C`
     /// comes back unscaled).
     Fused,
@@ -1656,14 +1740,9 @@ fn store_pass(
     let mut total = VSums::new(npx, levels);
     let mut num_total = vec![0.0f64; cells_needed];
     let mut den_total = vec![0.0f64; cells_needed];
-    // without the statistics, the branch-free kernel ([`PassCtx::dense`]), which reads V in
-    // the visiting order (the C visit splats its observations with that V)
-    let dense_path = !stats;
-    let v_ord: Vec<f64> = if dense_path {
-        p.order.iter().map(|&q| model.v[q as usize]).collect()
-    } else {
-        Vec::new()
-    };
+    // the branch-free kernel ([`PassCtx::dense`]) reads V in the visiting order (the C
+    // visit splats its observations with that V)
+    let v_ord: Vec<f64> = p.order.iter().map(|&q| model.v[q as usize]).collect();
     fold_frame_jobs(
         &p.jobs,
         |job| -> Result<StoreJob, PhotometricError> {
@@ -1677,40 +1756,16 @@ fn store_pass(
                 v: VSums::new(if npx > 0 { end - start } else { 0 }, levels),
                 cacc: vec![[0.0f32; 2]; cells_needed],
             };
-            let mut new_v = vec![
-                0.0f64;
-                if visit == Visit::Fused {
-                    end - start
-                } else {
-                    0
-                }
-            ];
-            let mut batch = Batch::new();
-            let mut kept: Vec<Kept> = Vec::new();
-            // where each view's kept observations end, and its exposure
-            let mut groups: Vec<(usize, f64)> = Vec::with_capacity(views.len());
             let mut view_order: Vec<(u64, u32)> = Vec::with_capacity(views.len());
-            let (mut num_blk, mut den_blk, mut new_v_blk) = (
-                vec![0.0f64; BATCH],
-                vec![0.0f64; BATCH],
-                vec![0.0f64; BATCH],
-            );
-            let mut dense = if dense_path && visit == Visit::Fused {
-                Dense::with_views(views.len())
+            let mut blk = BlockSums::new();
+            let mut new_v_blk = vec![0.0f64; BATCH];
+            let mut dense = Dense::with_views(if visit == Visit::Fused {
+                views.len()
             } else {
-                Dense::with_views(1)
-            };
-            let mut splats = Splats::new(
-                if dense_path && visit != Visit::V {
-                    cells_needed
-                } else {
-                    0
-                },
-                p.grid,
-            );
+                1
+            });
+            let mut splats = Splats::new(if visit != Visit::V { cells_needed } else { 0 }, p.grid);
             for block in blocks {
-                kept.clear();
-                groups.clear();
                 // the views in the order of where the block lands on the plane (a Morton
                 // order of its first pixel's cell tile): neighbouring views gather and splat
                 // on neighbouring cells
@@ -1722,103 +1777,62 @@ fn store_pass(
                     (key, vi as u32)
                 }));
                 view_order.sort_unstable();
-                if dense_path {
-                    let len = block.len();
-                    num_blk[..len].fill(0.0);
-                    den_blk[..len].fill(0.0);
-                    let v_blk = &v_ord[block.clone()];
-                    for (vo, &(_, vi)) in view_order.iter().enumerate() {
-                        let geom = &views[vi as usize].geom;
-                        let (nb, db) = (&mut num_blk[..], &mut den_blk[..]);
-                        // (the V step alone needs no observation after its sums)
-                        let slot = if visit == Visit::Fused { vo * len } else { 0 };
-                        acc.v.nobs += match store.block(block, vi as usize) {
-                            SamplesRef::U8(d) => {
-                                ctx.dense(geom, d, block.clone(), v_blk, nb, db, &mut dense, slot)
-                            }
-                            SamplesRef::U16(d) => {
-                                ctx.dense(geom, d, block.clone(), v_blk, nb, db, &mut dense, slot)
-                            }
-                        };
-                        if visit == Visit::C {
-                            // the C step with V as it is: the view's splats at once
-                            let t = geom.exposure_ms;
-                            ctx.splat_dense(&dense, 0, len, t, v_blk, &mut splats, &mut acc.cacc);
-                        }
-                    }
-                    if visit == Visit::C {
-                        continue;
-                    }
-                    for (j, &q) in p.order[block.clone()].iter().enumerate() {
-                        let a = q as usize - start;
-                        acc.v.num[a] += num_blk[j];
-                        acc.v.den[a] += den_blk[j];
-                    }
-                    if visit == Visit::Fused {
-                        // the block's new V (unscaled), and its observations' share of the
-                        // C step
-                        for j in 0..len {
-                            new_v_blk[j] = if den_blk[j] > 0.0 {
-                                num_blk[j] / den_blk[j]
-                            } else {
-                                v_blk[j]
-                            };
-                        }
-                        for (vo, &(_, vi)) in view_order.iter().enumerate() {
-                            let t = views[vi as usize].geom.exposure_ms;
-                            let (d, nv) = (&dense, &new_v_blk);
-                            ctx.splat_dense(d, vo * len, len, t, nv, &mut splats, &mut acc.cacc);
-                        }
-                    }
-                    continue;
-                }
-                for &(_, vi) in &view_order {
+                let len = block.len();
+                blk.clear();
+                let v_blk = &v_ord[block.clone()];
+                for (vo, &(_, vi)) in view_order.iter().enumerate() {
                     let view = &views[vi as usize];
-                    match store.block(block, vi as usize) {
+                    let geom = &view.geom;
+                    // (the V step alone needs no observation after its sums)
+                    let slot = if visit == Visit::Fused { vo * len } else { 0 };
+                    let st = stats.then_some((&mut acc.v, view.i % 2 == 1));
+                    let (b, out) = (&mut blk, &mut dense);
+                    let nobs = match store.block(block, vi as usize) {
                         SamplesRef::U8(d) => {
-                            ctx.stages(&view.geom, InBlock(d), block.clone(), &mut batch)
+                            ctx.dense(geom, d, block.clone(), v_blk, b, st, out, slot)
                         }
                         SamplesRef::U16(d) => {
-                            ctx.stages(&view.geom, InBlock(d), block.clone(), &mut batch)
+                            ctx.dense(geom, d, block.clone(), v_blk, b, st, out, slot)
                         }
+                    };
+                    acc.v.nobs += nobs;
+                    if visit == Visit::C {
+                        // the C step with V as it is: the view's splats at once
+                        let t = geom.exposure_ms;
+                        ctx.splat_dense(&dense, 0, len, t, v_blk, &mut splats, &mut acc.cacc);
                     }
-                    let keep = (visit == Visit::Fused).then_some(&mut kept);
-                    match visit {
-                        Visit::C => ctx.c_sums(&view.geom, &batch, &mut acc),
-                        _ if stats => {
-                            ctx.v_sums::<true>(view.i, &view.geom, &batch, &mut acc.v, start, keep)
-                        }
-                        _ => {
-                            ctx.v_sums::<false>(view.i, &view.geom, &batch, &mut acc.v, start, keep)
-                        }
-                    }
-                    groups.push((kept.len(), view.geom.exposure_ms));
                 }
-                if visit != Visit::Fused {
+                if visit == Visit::C {
                     continue;
                 }
-                // the block's new V (unscaled), and its observations' share of the C step
-                for &q in &p.order[block.clone()] {
-                    let (px, a) = (q as usize, q as usize - start);
-                    new_v[a] = if acc.v.den[a] > 0.0 {
-                        acc.v.num[a] / acc.v.den[a]
-                    } else {
-                        model.v[px]
-                    };
+                for (j, &q) in p.order[block.clone()].iter().enumerate() {
+                    let a = q as usize - start;
+                    acc.v.num[a] += blk.num[j];
+                    acc.v.den[a] += blk.den[j];
+                    if stats {
+                        acc.v.num_odd[a] += blk.num_odd[j];
+                        acc.v.den_odd[a] += blk.den_odd[j];
+                        acc.v.counts[a] += blk.counts[j];
+                    }
                 }
-                let mut from = 0;
-                for &(to, t) in &groups {
-                    ctx.splat_kept(&kept[from..to], t, &new_v, &mut acc.cacc);
-                    from = to;
+                if visit == Visit::Fused {
+                    // the block's new V (unscaled), and its observations' share of the C step
+                    for j in 0..len {
+                        new_v_blk[j] = if blk.den[j] > 0.0 {
+                            blk.num[j] / blk.den[j]
+                        } else {
+                            v_blk[j]
+                        };
+                    }
+                    for (vo, &(_, vi)) in view_order.iter().enumerate() {
+                        let t = views[vi as usize].geom.exposure_ms;
+                        let (d, nv) = (&dense, &new_v_blk);
+                        ctx.splat_dense(d, vo * len, len, t, nv, &mut splats, &mut acc.cacc);
+                    }
                 }
             }
-            // the dense kernel's splats say which cells they reached (only those are added
-            // to the totals); else all of them
-            let reached = if dense_path {
-                splats.finish(&mut acc.cacc)
-            } else {
-                0..cells_needed
-            };
+            // the splats say which cells they reached (only those are added to the totals)
+            let reached = splats.finish(&mut acc.cacc);
             Ok((start..end, acc.v, acc.cacc, reached))
         },
         |(range, vs, cacc, reached)| {
