@@ -2272,12 +2272,14 @@ pub fn calibrate_vignette(
         iterations,
         converged,
         change,
+        stats,
     } = stage;
     let iterations = iterations + coarse_iterations;
-    // the final statistics with the final V and C
-    let vs = match &store {
-        Some(st) => store_pass(&problem, &model, &tables, st, Visit::V, true)?.0,
-        None => pass(&problem, &model, &tables, Step::V, true)?.0,
+    // the final statistics: of the last iteration, or from a pass with the final V and C
+    let vs = match (stats, &store) {
+        (Some(vs), _) => vs,
+        (None, Some(st)) => store_pass(&problem, &model, &tables, st, Visit::V, true)?.0,
+        (None, None) => pass(&problem, &model, &tables, Step::V, true)?.0,
     };
     drop(store);
     finish(
@@ -2312,6 +2314,9 @@ struct Stage {
     iterations: usize,
     converged: bool,
     change: Vec<f64>,
+    /// The statistics of the last iteration, when it took them with the problem fixed (see
+    /// [`solve`]).
+    stats: Option<VSums>,
 }
 
 /// Alternates V and C steps (Anderson-accelerated) on `problem` until the RMS relative
@@ -2355,7 +2360,7 @@ fn solve(
     };
     model.reject = warm_start;
     let mut anderson = Anderson::new(ANDERSON_MEMORY);
-    let mut change = Vec::new();
+    let mut change: Vec<f64> = Vec::new();
     let mut converged = false;
     let mut iterations = 0;
     let ncell = model.c.len();
@@ -2365,10 +2370,24 @@ fn solve(
     // residuals for NOISE_FIT_ITERATIONS; from then on the problem is fixed
     const SETTLE: usize = 4;
     const NOISE_FIT_ITERATIONS: usize = 7;
+    let mut final_stats = None;
+    // the stop rule's bound of the last iteration
+    let mut last_enough = f64::INFINITY;
     for it in 0..max_iterations.max(1) {
         iterations = it + 1;
-        // the statistics of the residuals while the noise model follows them
-        let stats = !warm_start && it < NOISE_FIT_ITERATIONS;
+        // whether the problem (noise model, outliers) stays as it is from this iteration on
+        let fixed = warm_start || it >= NOISE_FIT_ITERATIONS;
+        // the statistics of the residuals while the noise model follows them, and in an
+        // iteration that looks like the last (its change, extrapolated from the last two,
+        // below twice the stop rule's bound): when it is, the result's statistics come from
+        // it, with the V and C before its step (which changes V by less than the bound: a
+        // few percent of its standard error), instead of from one more pass
+        let likely_last = fixed
+            && match change[..] {
+                [.., a, b] => b * (b / a).min(1.0) < 2.0 * last_enough,
+                _ => false,
+            };
+        let stats = (!warm_start && it < NOISE_FIT_ITERATIONS) || likely_last;
         // V step with the current C (and, all frames at hand, the C step with its V)
         let (vs, fused_c) = match store {
             Some(st) => {
@@ -2472,10 +2491,14 @@ fn solve(
             anderson.reset();
         }
         let enough = tolerance.max(noise_tolerance * median_std_error(&model.v, &vs.den));
-        if (warm_start || it + 1 > NOISE_FIT_ITERATIONS) && delta < enough {
+        if fixed && delta < enough {
             converged = true;
+            if stats {
+                final_stats = Some(vs);
+            }
             break;
         }
+        last_enough = enough;
     }
     Ok(Stage {
         model,
@@ -2483,6 +2506,7 @@ fn solve(
         iterations,
         converged,
         change,
+        stats: final_stats,
     })
 }
 
