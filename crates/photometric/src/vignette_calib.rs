@@ -1044,7 +1044,6 @@ impl<'a, 'p> PassCtx<'a, 'p> {
 /// fixed ([`PassCtx::dense`]), one entry per position of the block: the first bilinear tap,
 /// the fractions between the taps, and what the C step needs (weight times `U`, weight times
 /// `C`, and the weight, 0 for a position without an observation).
-#[derive(Default)]
 struct Dense {
     at: Vec<u32>,
     fx: Vec<f64>,
@@ -1052,6 +1051,21 @@ struct Dense {
     wo: Vec<f32>,
     wc: Vec<f32>,
     w: Vec<f32>,
+    /// The kernel's arrays between its loops (kept here: fresh ones cost a zeroing of 18 KiB
+    /// per block and frame).
+    scratch: Box<Scratch>,
+}
+
+/// The arrays between the loops of [`PassCtx::dense`], by position in the block: `C` at the
+/// four taps, `U` of the sample, `C` at the position, its squared gradient, the noise bin of
+/// the prediction and the variance there.
+struct Scratch {
+    taps: [[f64; BATCH]; 4],
+    obs: [f64; BATCH],
+    cqs: [f64; BATCH],
+    grad2s: [f64; BATCH],
+    bins: [u32; BATCH],
+    var: [f64; BATCH],
 }
 
 impl Dense {
@@ -1065,6 +1079,14 @@ impl Dense {
             wo: vec![0.0; n],
             wc: vec![0.0; n],
             w: vec![0.0; n],
+            scratch: Box::new(Scratch {
+                taps: [[0.0; BATCH]; 4],
+                obs: [0.0; BATCH],
+                cqs: [0.0; BATCH],
+                grad2s: [0.0; BATCH],
+                bins: [0; BATCH],
+                var: [0.0; BATCH],
+            }),
         }
     }
 }
@@ -1220,22 +1242,24 @@ impl PassCtx<'_, '_> {
         // in four loops, so that the two without table lookups are vectorised: the
         // lookups of C at the taps and of U; C there, its gradient, the prediction and its
         // noise bin; the lookup of the variance; the weights and the sums
-        let mut taps = [[0.0f64; BATCH]; 4];
-        let mut obs = [0.0f64; BATCH];
+        let sc = &mut *out.scratch;
+        let [t0, t1, t2, t3] = &mut sc.taps;
+        let (t0, t1, t2, t3) = (&mut t0[..n], &mut t1[..n], &mut t2[..n], &mut t3[..n]);
+        let obs = &mut sc.obs[..n];
         for j in 0..n {
             let a = (at[j] as usize).min(at_max);
-            taps[0][j] = c[a] as f64;
-            taps[1][j] = c[a + 1] as f64;
-            taps[2][j] = c[a + grid] as f64;
-            taps[3][j] = c[a + grid + 1] as f64;
+            t0[j] = c[a] as f64;
+            t1[j] = c[a + 1] as f64;
+            t2[j] = c[a + grid] as f64;
+            t3[j] = c[a + grid + 1] as f64;
             obs[j] = u[(samples[j].into() as usize).min(u_last)];
         }
-        let mut cqs = [0.0f64; BATCH];
-        let mut grad2s = [0.0f64; BATCH];
-        let mut bins = [0u32; BATCH];
+        let cqs = &mut sc.cqs[..n];
+        let grad2s = &mut sc.grad2s[..n];
+        let bins = &mut sc.bins[..n];
         for j in 0..n {
             let (fx, fy) = (fxs[j], fys[j]);
-            let (c0, c1, c2, c3) = (taps[0][j], taps[1][j], taps[2][j], taps[3][j]);
+            let (c0, c1, c2, c3) = (t0[j], t1[j], t2[j], t3[j]);
             let upper = c0 + (c1 - c0) * fx;
             let lower = c2 + (c3 - c2) * fx;
             let cq = upper + (lower - upper) * fy;
@@ -1246,7 +1270,7 @@ impl PassCtx<'_, '_> {
             let pred = t * cq * v_ord[j];
             bins[j] = tables.bin(pred) as u32;
         }
-        let mut var = [0.0f64; BATCH];
+        let var = &mut sc.var[..n];
         for j in 0..n {
             // (bins are at most VAR_BINS - 1, a power of two less one: the mask only
             // spares the bounds check)
