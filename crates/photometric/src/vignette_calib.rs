@@ -715,23 +715,6 @@ struct JobSums {
     cacc: Vec<[f32; 2]>,
 }
 
-/// Where the stages read the samples of a batch: `sample(j, px)` is the sample of the
-/// batch's `j`-th position, at pixel `px`.
-trait SampleSource: Copy {
-    fn sample(self, j: usize, px: u32) -> u16;
-}
-
-/// A frame's samples, row-major: by pixel.
-#[derive(Clone, Copy)]
-struct RowMajor<'a, S>(&'a [S]);
-
-impl<S: Copy + Into<u16>> SampleSource for RowMajor<'_, S> {
-    #[inline]
-    fn sample(self, _j: usize, px: u32) -> u16 {
-        self.0[px as usize].into()
-    }
-}
-
 /// The splats of the C step visit the observations of a batch this many apart (see
 /// [`PassCtx::splat_dense`]).
 const SPLAT_STRIDE: usize = 4;
@@ -812,7 +795,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
         b: &mut Batch,
     ) {
         for start in block.clone().step_by(BATCH) {
-            self.stages(pf, RowMajor(data), start..(start + BATCH).min(block.end), b);
+            self.stages(pf, data, start..(start + BATCH).min(block.end), b);
             // stage 4: the weighted residuals into the sums
             match self.step {
                 Step::V if self.stats => self.v_sums::<true>(i, pf, b, &mut acc.v, 0),
@@ -822,12 +805,12 @@ impl<'a, 'p> PassCtx<'a, 'p> {
         }
     }
 
-    /// Stages 1 to 3 of the observations of frame `pf` at the pixels `chunk` (at most
-    /// [`BATCH`] positions in the problem's sample) into `b`.
-    fn stages<S: SampleSource>(
+    /// Stages 1 to 3 of the observations of frame `pf` (its samples `data`, row-major) at
+    /// the pixels `ks` (at most [`BATCH`] positions in the problem's sample) into `b`.
+    fn stages<S: Copy + Into<u16>>(
         &self,
         pf: &Geom,
-        data: S,
+        data: &[S],
         ks: std::ops::Range<usize>,
         b: &mut Batch,
     ) {
@@ -844,10 +827,10 @@ impl<'a, 'p> PassCtx<'a, 'p> {
     /// [`PassCtx::stages`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn stages_avx2<S: SampleSource>(
+    fn stages_avx2<S: Copy + Into<u16>>(
         &self,
         pf: &Geom,
-        data: S,
+        data: &[S],
         ks: std::ops::Range<usize>,
         b: &mut Batch,
     ) {
@@ -856,10 +839,10 @@ impl<'a, 'p> PassCtx<'a, 'p> {
 
     /// The body of [`PassCtx::stages`] (inlined into both of its builds).
     #[inline(always)]
-    fn stages_body<S: SampleSource>(
+    fn stages_body<S: Copy + Into<u16>>(
         &self,
         pf: &Geom,
-        data: S,
+        data: &[S],
         ks: std::ops::Range<usize>,
         b: &mut Batch,
     ) {
@@ -892,7 +875,7 @@ impl<'a, 'p> PassCtx<'a, 'p> {
             let mut n = 0;
             let (order, pix) = (&p.order[ks.clone()], &p.ordered_pix[ks]);
             for (j, (&pos, &px)) in order.iter().zip(pix).enumerate() {
-                let k = data.sample(j, px);
+                let k = data[px as usize].into();
                 if k == self.top || !b.inside[j] {
                     continue;
                 }
