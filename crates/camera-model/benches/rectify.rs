@@ -45,6 +45,17 @@ fn bench(c: &mut Criterion) {
                 .unwrap()
         })
     });
+    let mut lut16 = [0u16; 256];
+    for (i, v) in lut16.iter_mut().enumerate() {
+        *v = ((i as f32 / 255.0).powf(2.2) * 65535.0) as u16;
+    }
+    let gain = vec![1.0f32 / 256.0 / 257.0; out.pixels()];
+    g.bench_function("remap_lut_gain_to_u8_640x480", |b| {
+        b.iter(|| {
+            map.remap_lut_gain_into(black_box(&raw), &lut16, &gain, 1.0, 255, &mut dst)
+                .unwrap()
+        })
+    });
     g.finish();
 }
 

@@ -37,6 +37,7 @@
 
 mod camera_file;
 mod error;
+mod fixed;
 mod image;
 mod model;
 mod rectify;
@@ -45,6 +46,7 @@ pub use camera_file::{
     intrinsics_from_file_values, intrinsics_to_file_values, CameraFile, ImageSize, OutputMode,
 };
 pub use error::CameraError;
+pub use fixed::avx2_enabled;
 pub use image::Image;
 pub use model::{CameraModel, Intrinsics};
 pub use rectify::{output_intrinsics, output_notes, RectifyMap};

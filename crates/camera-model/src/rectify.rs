@@ -1,5 +1,6 @@
 //! Output pinhole cameras (`crop`, `full`, `none`, explicit) and rectification maps.
 
+use crate::fixed::{packed_weights, FixedMap};
 use crate::model::fov_undistort_radius;
 use crate::{CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode};
 
@@ -432,10 +433,6 @@ fn crop_numeric(
     )))
 }
 
-/// Bits of the fixed-point bilinear weights of the 8-bit remap.
-const FRAC_BITS: u32 = 8;
-const FRAC_ONE: u32 = 1 << FRAC_BITS;
-
 /// A precomputed map from every output pixel to its bilinear source in the input image.
 ///
 /// Each output pixel stores the index of the top-left source pixel and the fractional offsets,
@@ -449,45 +446,8 @@ pub struct RectifyMap {
     camera: Intrinsics,
     index: Vec<u32>,
     frac: Vec<[f32; 2]>,
-    fixed: Vec<FixedEntry>,
+    fixed: FixedMap,
     invalid: usize,
-}
-
-/// One output pixel of the 8-bit remap: source index and the four bilinear weights in 8-bit
-/// fixed point, summing to exactly 256 so that the weighted sum fits 16 bits.
-#[derive(Clone, Copy, Debug)]
-struct FixedEntry {
-    index: u32,
-    w: [u16; 4],
-}
-
-impl FixedEntry {
-    const INVALID: FixedEntry = FixedEntry {
-        index: u32::MAX,
-        w: [0; 4],
-    };
-
-    fn new(index: u32, fx: f64, fy: f64) -> FixedEntry {
-        let one = FRAC_ONE as f64;
-        let w11 = (fx * fy * one).round();
-        let w01 = (fx * one).round() - w11;
-        let w10 = (fy * one).round() - w11;
-        let mut w = [one - w01 - w10 - w11, w01, w10, w11];
-        // Rounding can push the smallest weight to -1; move that unit to the largest one so
-        // the weights stay non-negative and sum to exactly 256.
-        for i in 0..4 {
-            if w[i] < 0.0 {
-                let deficit = -w[i];
-                w[i] = 0.0;
-                let j = (0..4).fold(0, |m, k| if w[k] > w[m] { k } else { m });
-                w[j] -= deficit;
-            }
-        }
-        FixedEntry {
-            index,
-            w: w.map(|v| v as u16),
-        }
-    }
 }
 
 impl RectifyMap {
@@ -544,43 +504,46 @@ impl RectifyMap {
         })
     }
 
+    /// The map from `source` (the input position of output pixel `(u, v)`, if any), its
+    /// rows computed in parallel (the camera model's trigonometry is most of the cost).
     fn build(
         in_size: ImageSize,
         out_size: ImageSize,
         camera: Intrinsics,
-        source: impl Fn(usize, usize) -> Option<[f64; 2]>,
+        source: impl Fn(usize, usize) -> Option<[f64; 2]> + Sync,
     ) -> Result<RectifyMap, CameraError> {
+        use rayon::prelude::*;
         let in_size = in_size.validate()?;
         let out_size = out_size.validate()?;
-        let n = out_size.pixels();
-        let mut index = Vec::with_capacity(n);
-        let mut frac = Vec::with_capacity(n);
-        let mut fixed = Vec::with_capacity(n);
-        let mut invalid = 0;
         let (wm1, hm1) = (in_size.width - 1, in_size.height - 1);
-        for v in 0..out_size.height {
-            for u in 0..out_size.width {
-                match source(u, v).and_then(|s| snap_inside(s, in_size)) {
-                    Some(src) => {
-                        // Keep x0 <= w-2 so that x0 + 1 is in the image; x == w-1 gives fx = 1.
-                        let x0 = (src[0].floor() as usize).min(wm1 - 1);
-                        let y0 = (src[1].floor() as usize).min(hm1 - 1);
-                        let fx = src[0] - x0 as f64;
-                        let fy = src[1] - y0 as f64;
-                        let i = (y0 * in_size.width + x0) as u32;
-                        index.push(i);
-                        frac.push([fx as f32, fy as f32]);
-                        fixed.push(FixedEntry::new(i, fx, fy));
-                    }
-                    None => {
+        let (n, ow) = (out_size.pixels(), out_size.width);
+        let mut index = vec![u32::MAX; n];
+        let mut frac = vec![[0f32; 2]; n];
+        let mut fixed = FixedMap::invalid(n);
+        let invalid = index
+            .par_chunks_mut(ow)
+            .zip(frac.par_chunks_mut(ow))
+            .zip(fixed.rows_mut(ow))
+            .enumerate()
+            .map(|(v, ((index, frac), mut fixed))| {
+                let mut invalid = 0;
+                for u in 0..ow {
+                    let Some(src) = source(u, v).and_then(|s| snap_inside(s, in_size)) else {
                         invalid += 1;
-                        index.push(u32::MAX);
-                        frac.push([0.0, 0.0]);
-                        fixed.push(FixedEntry::INVALID);
-                    }
+                        continue;
+                    };
+                    // Keep x0 <= w-2 so that x0 + 1 is in the image; x == w-1 gives fx = 1.
+                    let x0 = (src[0].floor() as usize).min(wm1 - 1);
+                    let y0 = (src[1].floor() as usize).min(hm1 - 1);
+                    let (fx, fy) = (src[0] - x0 as f64, src[1] - y0 as f64);
+                    let i = (y0 * in_size.width + x0) as u32;
+                    index[u] = i;
+                    frac[u] = [fx as f32, fy as f32];
+                    fixed.set(u, i, packed_weights(fx, fy));
                 }
-            }
-        }
+                invalid
+            })
+            .sum();
         Ok(RectifyMap {
             input: in_size,
             output: out_size,
@@ -688,24 +651,8 @@ impl RectifyMap {
     pub fn remap_u8_into(&self, src: &Image<u8>, dst: &mut Image<u8>) -> Result<(), CameraError> {
         self.check_input(src)?;
         self.check_output(dst)?;
-        let s = src.data();
-        let w = self.input.width;
-        let out = dst.data_mut();
-        for (o, e) in out.iter_mut().zip(&self.fixed) {
-            let i = e.index as usize;
-            // Only the invalid marker u32::MAX fails this test; it also lets the compiler drop
-            // the four bounds checks below.
-            if i + w + 1 >= s.len() {
-                *o = 0;
-                continue;
-            }
-            let v = s[i] as u16 * e.w[0]
-                + s[i + 1] as u16 * e.w[1]
-                + s[i + w] as u16 * e.w[2]
-                + s[i + w + 1] as u16 * e.w[3];
-            // v <= 255 * 256, so adding half a unit cannot overflow
-            *o = ((v as u32 + (1 << (FRAC_BITS - 1))) >> FRAC_BITS) as u8;
-        }
+        self.fixed
+            .remap_u8(src.data(), self.input.width, dst.data_mut());
         Ok(())
     }
 
@@ -784,22 +731,15 @@ impl RectifyMap {
                 len: gain.len(),
             });
         }
-        let s = src.data();
-        let w = self.input.width;
-        let maxf = max as f32;
-        for ((o, e), &g) in dst.data_mut().iter_mut().zip(&self.fixed).zip(gain) {
-            let i = e.index as usize;
-            if i + w + 1 >= s.len() {
-                *o = T::default();
-                continue;
-            }
-            let v = lut[s[i] as usize] as u32 * e.w[0] as u32
-                + lut[s[i + 1] as usize] as u32 * e.w[1] as u32
-                + lut[s[i + w] as usize] as u32 * e.w[2] as u32
-                + lut[s[i + w + 1] as usize] as u32 * e.w[3] as u32;
-            let q = (v as f32 * (g * factor) + 0.5).min(maxf) as u32;
-            *o = T::try_from(q).unwrap_or_default();
-        }
+        self.fixed.remap_lut_gain(
+            src.data(),
+            self.input.width,
+            lut,
+            gain,
+            factor,
+            max as f32,
+            dst.data_mut(),
+        );
         Ok(())
     }
 
@@ -835,15 +775,15 @@ impl RectifyMap {
 
 #[cfg(test)]
 mod tests {
-    use super::FixedEntry;
+    use crate::fixed::weights;
 
     #[test]
     fn fixed_point_weights_are_non_negative_and_sum_to_256() {
         for i in 0..=200 {
             for j in 0..=200 {
                 let (fx, fy) = (i as f64 / 200.0, j as f64 / 200.0);
-                let e = FixedEntry::new(0, fx, fy);
-                assert_eq!(e.w.iter().map(|&w| w as u32).sum::<u32>(), 256);
+                let e = weights(fx, fy);
+                assert_eq!(e.iter().map(|&w| w as u32).sum::<u32>(), 256);
                 // each weight within one unit of the exact bilinear weight
                 let exact = [
                     (1.0 - fx) * (1.0 - fy),
@@ -851,8 +791,8 @@ mod tests {
                     (1.0 - fx) * fy,
                     fx * fy,
                 ];
-                for (w, x) in e.w.iter().zip(exact) {
-                    assert!((*w as f64 - x * 256.0).abs() <= 1.5, "{fx} {fy} {:?}", e.w);
+                for (w, x) in e.iter().zip(exact) {
+                    assert!((*w as f64 - x * 256.0).abs() <= 1.5, "{fx} {fy} {e:?}");
                 }
             }
         }

@@ -9,7 +9,9 @@ use std::sync::OnceLock;
 fn fixture() -> &'static PathBuf {
     static SEQ: OnceLock<PathBuf> = OnceLock::new();
     SEQ.get_or_init(|| {
-        let d = temp_dir("rectify_fixture");
+        // one per process: test runners that run each test in its own process (nextest)
+        // would otherwise generate it into the same folder at once
+        let d = temp_dir(&format!("rectify_fixture_{}", std::process::id()));
         let seq = d.join("seq");
         let o = monovo(&[
             "synth",
@@ -420,4 +422,86 @@ fn outputs_are_bit_identical_with_one_and_two_threads() {
             "{name}: outputs differ between 1 and 2 threads"
         );
     }
+}
+
+#[test]
+fn outputs_are_bit_identical_with_and_without_avx2() {
+    let d = temp_dir("rectify_avx2");
+    for (name, extra) in [
+        ("geometric", vec![]),
+        ("photometric", vec!["--photometric"]),
+        ("irradiance16", vec!["--irradiance", "--depth", "16"]),
+    ] {
+        let mut outputs = Vec::new();
+        for portable in [false, true] {
+            let out = d.join(format!("{name}{portable}"));
+            let mut args = vec![
+                "rectify",
+                fixture().to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            args.extend(&extra);
+            let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"));
+            if portable {
+                cmd.env("MONOVO_NO_AVX2", "1");
+            }
+            let o = cmd.args(&args).output().unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            outputs.push(files_of(&out));
+        }
+        assert!(outputs[0].len() >= 3, "{name}");
+        assert!(
+            outputs[0] == outputs[1],
+            "{name}: outputs differ with and without AVX2"
+        );
+    }
+}
+
+#[test]
+fn compression_none_stores_the_same_pixels() {
+    let d = temp_dir("rectify_stored");
+    let (fast, stored) = (d.join("fast"), d.join("stored"));
+    for (out, extra) in [(&fast, vec![]), (&stored, vec!["--compression", "none"])] {
+        let mut args = vec![
+            "rectify",
+            fixture().to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--photometric",
+        ];
+        args.extend(&extra);
+        let o = monovo(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let (a, b) = (
+        Sequence::open(&fast).unwrap(),
+        Sequence::open(&stored).unwrap(),
+    );
+    assert_eq!((a.len(), b.len()), (8, 8));
+    for k in 0..8 {
+        assert_eq!(a.decode(k).unwrap(), b.decode(k).unwrap(), "frame {k}");
+        let size = |s: &Path| {
+            std::fs::metadata(s.join(format!("images/{k:05}.png")))
+                .unwrap()
+                .len()
+        };
+        // stored: at least the raw 640x480 bytes; the fast deflate well below them
+        assert!(size(&stored) >= 640 * 480, "{}", size(&stored));
+        assert!(size(&fast) < 640 * 400, "{}", size(&fast));
+    }
+    let o = monovo(&[
+        "rectify",
+        fixture().to_str().unwrap(),
+        "-o",
+        d.join("x").to_str().unwrap(),
+        "--compression",
+        "zstd",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected fast or none"),
+        "{}",
+        stderr(&o)
+    );
 }

