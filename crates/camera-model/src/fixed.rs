@@ -62,6 +62,16 @@ pub(crate) struct FixedMap {
     bottom: Vec<u32>,
 }
 
+/// The photometric part of [`FixedMap::remap_lut_gain`]: the table the source values are
+/// looked up in, the gain per output pixel and the frame's factor, and the largest output.
+#[derive(Clone, Copy)]
+pub(crate) struct LutGain<'a> {
+    pub(crate) lut: &'a [u16; 256],
+    pub(crate) gain: &'a [f32],
+    pub(crate) factor: f32,
+    pub(crate) max: f32,
+}
+
 /// One row of a [`FixedMap`] being filled.
 pub(crate) struct FixedRow<'a> {
     index: &'a mut [u32],
@@ -142,15 +152,11 @@ impl FixedMap {
     /// The fused photometric remap: each source value looked up in `lut`, interpolated,
     /// times `gain[k] * factor`, rounded and clamped to `0..=max` (as `f32`, in this order of
     /// operations); invalid pixels are `T::default()`. `gain` has one value per entry.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn remap_lut_gain<T: Copy + Default + TryFrom<u32>>(
         &self,
         s: &[u8],
         w: usize,
-        lut: &[u16; 256],
-        gain: &[f32],
-        factor: f32,
-        max: f32,
+        g: &LutGain<'_>,
         out: &mut [T],
     ) {
         #[cfg(target_arch = "x86_64")]
@@ -159,25 +165,27 @@ impl FixedMap {
             // the table: see `remap_lut_gain_avx2`
             #[allow(unsafe_code)]
             unsafe {
-                self.remap_lut_gain_avx2(s, w, lut, gain, factor, max, out)
+                self.remap_lut_gain_avx2(s, w, g, out)
             };
             return;
         }
-        self.remap_lut_gain_scalar(s, w, lut, gain, factor, max, out, 0);
+        self.remap_lut_gain_scalar(s, w, g, out, 0);
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn remap_lut_gain_scalar<T: Copy + Default + TryFrom<u32>>(
         &self,
         s: &[u8],
         w: usize,
-        lut: &[u16; 256],
-        gain: &[f32],
-        factor: f32,
-        max: f32,
+        g: &LutGain<'_>,
         out: &mut [T],
         from: usize,
     ) {
+        let LutGain {
+            lut,
+            gain,
+            factor,
+            max,
+        } = *g;
         let entries = self.index.iter().zip(&self.top).zip(&self.bottom);
         for ((o, &g), ((&i, &a), &b)) in out.iter_mut().zip(gain).zip(entries).skip(from) {
             let i = i as usize;
@@ -205,18 +213,21 @@ impl FixedMap {
     /// 256-entry table.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    #[allow(unsafe_code, clippy::too_many_arguments)]
+    #[allow(unsafe_code)]
     unsafe fn remap_lut_gain_avx2<T: Copy + Default + TryFrom<u32>>(
         &self,
         s: &[u8],
         w: usize,
-        lut: &[u16; 256],
-        gain: &[f32],
-        factor: f32,
-        max: f32,
+        g: &LutGain<'_>,
         out: &mut [T],
     ) {
         use std::arch::x86_64::*;
+        let LutGain {
+            lut,
+            gain,
+            factor,
+            max,
+        } = *g;
         let n = self.len().min(out.len()).min(gain.len());
         let (index, top, bottom) = (&self.index[..n], &self.top[..n], &self.bottom[..n]);
         let wide: [i32; 256] = lut.map(i32::from);
@@ -272,7 +283,7 @@ impl FixedMap {
             }
             k += 8;
         }
-        self.remap_lut_gain_scalar(s, w, lut, gain, factor, max, out, k);
+        self.remap_lut_gain_scalar(s, w, g, out, k);
     }
 
     /// [`FixedMap::remap_u8`] sixteen pixels at a time: per eight pixels one gather of the
@@ -340,7 +351,7 @@ impl FixedMap {
 
 #[cfg(test)]
 mod tests {
-    use super::{packed_weights, FixedMap};
+    use super::{packed_weights, FixedMap, LutGain};
 
     /// A small deterministic generator (the tests' own: no dependency for a test).
     fn lcg(state: &mut u64) -> u64 {
@@ -399,13 +410,19 @@ mod tests {
                 })
                 .collect();
             for max in [255u32, 65535] {
+                let g = LutGain {
+                    lut: &lut,
+                    gain: &gain,
+                    factor: 0.7,
+                    max: max as f32,
+                };
                 let (mut fast, mut slow) = (vec![1u16; n], vec![2u16; n]);
-                map.remap_lut_gain(&s, w, &lut, &gain, 0.7, max as f32, &mut fast);
-                map.remap_lut_gain_scalar(&s, w, &lut, &gain, 0.7, max as f32, &mut slow, 0);
+                map.remap_lut_gain(&s, w, &g, &mut fast);
+                map.remap_lut_gain_scalar(&s, w, &g, &mut slow, 0);
                 assert_eq!(fast, slow, "{w}x{h} to {max}");
                 let (mut fast, mut slow) = (vec![1u8; n], vec![2u8; n]);
-                map.remap_lut_gain(&s, w, &lut, &gain, 0.7, max as f32, &mut fast);
-                map.remap_lut_gain_scalar(&s, w, &lut, &gain, 0.7, max as f32, &mut slow, 0);
+                map.remap_lut_gain(&s, w, &g, &mut fast);
+                map.remap_lut_gain_scalar(&s, w, &g, &mut slow, 0);
                 assert_eq!(fast, slow, "{w}x{h} to {max}, 8-bit");
             }
         }

@@ -1,6 +1,6 @@
 //! Output pinhole cameras (`crop`, `full`, `none`, explicit) and rectification maps.
 
-use crate::fixed::{packed_weights, FixedMap};
+use crate::fixed::{packed_weights, FixedMap, LutGain};
 use crate::model::fov_undistort_radius;
 use crate::{CameraError, CameraModel, Image, ImageSize, Intrinsics, OutputMode};
 
@@ -731,15 +731,14 @@ impl RectifyMap {
                 len: gain.len(),
             });
         }
-        self.fixed.remap_lut_gain(
-            src.data(),
-            self.input.width,
+        let g = LutGain {
             lut,
             gain,
             factor,
-            max as f32,
-            dst.data_mut(),
-        );
+            max: max as f32,
+        };
+        self.fixed
+            .remap_lut_gain(src.data(), self.input.width, &g, dst.data_mut());
         Ok(())
     }
 

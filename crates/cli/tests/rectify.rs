@@ -391,71 +391,70 @@ fn sixteen_bit_frames_with_an_embedded_bit_depth() {
 
 /// Every file of a folder, by relative path.
 /// The same rectification with 1 and with 2 threads writes bit-identical sequences.
-#[test]
-fn outputs_are_bit_identical_with_one_and_two_threads() {
-    let d = temp_dir("rectify_threads");
-    for (name, extra) in [
-        ("geometric", vec!["--zip"]),
-        ("photometric", vec!["--irradiance", "--reverse"]),
-    ] {
-        let mut outputs = Vec::new();
-        for threads in ["1", "2"] {
-            let out = d.join(format!("{name}{threads}"));
-            let mut args = vec![
-                "rectify",
-                fixture().to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ];
-            args.extend(&extra);
-            let o = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"))
-                .env("RAYON_NUM_THREADS", threads)
-                .args(&args)
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "{}", stderr(&o));
-            outputs.push(files_of(&out));
-        }
+/// Rectifies the fixture with each of `cases` (a name and extra arguments) in the two
+/// environments of `runs` (a label and variables to set) and checks that both runs write
+/// the same files to the byte.
+fn assert_same_outputs(dir: &str, cases: &[(&str, &[&str])], runs: [(&str, &[(&str, &str)]); 2]) {
+    let d = temp_dir(dir);
+    for (name, extra) in cases {
+        let outputs: Vec<_> = runs
+            .iter()
+            .map(|(label, envs)| {
+                let out = d.join(format!("{name}_{label}"));
+                let mut args = vec![
+                    "rectify",
+                    fixture().to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                ];
+                args.extend(*extra);
+                let o = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"))
+                    .envs(envs.iter().copied())
+                    .args(&args)
+                    .output()
+                    .unwrap();
+                assert!(o.status.success(), "{}", stderr(&o));
+                files_of(&out)
+            })
+            .collect();
         assert!(outputs[0].len() >= 3, "{name}");
         assert!(
             outputs[0] == outputs[1],
-            "{name}: outputs differ between 1 and 2 threads"
+            "{name}: outputs differ between {} and {}",
+            runs[0].0,
+            runs[1].0
         );
     }
 }
 
 #[test]
+fn outputs_are_bit_identical_with_one_and_two_threads() {
+    assert_same_outputs(
+        "rectify_threads",
+        &[
+            ("geometric", &["--zip"]),
+            ("photometric", &["--irradiance", "--reverse"]),
+        ],
+        [
+            ("1 thread", &[("RAYON_NUM_THREADS", "1")]),
+            ("2 threads", &[("RAYON_NUM_THREADS", "2")]),
+        ],
+    );
+}
+
+/// The AVX2 remaps (where the CPU has them) and the portable ones (`MONOVO_NO_AVX2`) write
+/// the same files; on a CPU without AVX2 both runs take the portable remaps.
+#[test]
 fn outputs_are_bit_identical_with_and_without_avx2() {
-    let d = temp_dir("rectify_avx2");
-    for (name, extra) in [
-        ("geometric", vec![]),
-        ("photometric", vec!["--photometric"]),
-        ("irradiance16", vec!["--irradiance", "--depth", "16"]),
-    ] {
-        let mut outputs = Vec::new();
-        for portable in [false, true] {
-            let out = d.join(format!("{name}{portable}"));
-            let mut args = vec![
-                "rectify",
-                fixture().to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ];
-            args.extend(&extra);
-            let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_monovo"));
-            if portable {
-                cmd.env("MONOVO_NO_AVX2", "1");
-            }
-            let o = cmd.args(&args).output().unwrap();
-            assert!(o.status.success(), "{}", stderr(&o));
-            outputs.push(files_of(&out));
-        }
-        assert!(outputs[0].len() >= 3, "{name}");
-        assert!(
-            outputs[0] == outputs[1],
-            "{name}: outputs differ with and without AVX2"
-        );
-    }
+    assert_same_outputs(
+        "rectify_avx2",
+        &[
+            ("geometric", &[]),
+            ("photometric", &["--photometric"]),
+            ("irradiance16", &["--irradiance", "--depth", "16"]),
+        ],
+        [("avx2", &[]), ("portable", &[("MONOVO_NO_AVX2", "1")])],
+    );
 }
 
 #[test]
