@@ -103,3 +103,39 @@ pub(crate) fn probe_folder(path: &Path, parent: &Path) -> Result<(), DatasetErro
         )),
     }
 }
+
+/// Opens a new scratch file in the folder `dir` (read and write, empty) for data too large
+/// for memory, such as the frames' samples of a long vignette calibration. It leaves nothing
+/// behind: on Unix its name (`.monovo-scratch.tmp-PID-N`) is removed as soon as it is open,
+/// the data staying reachable through the handle until it is closed; elsewhere the file is
+/// deleted when closed, and an interrupt in between removes it like any other temporary.
+pub fn scratch_file(dir: &Path) -> Result<std::fs::File, DatasetError> {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let path = temp_sibling(&dir.join("monovo-scratch"));
+    let _gate = creating();
+    temporaries::register(&path);
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true).write(true).create_new(true);
+    #[cfg(windows)]
+    {
+        use std::os::windows::fs::OpenOptionsExt;
+        // FILE_FLAG_DELETE_ON_CLOSE
+        options.custom_flags(0x0400_0000);
+    }
+    let opened = options.open(&path);
+    #[cfg(unix)]
+    if opened.is_ok() {
+        if let Err(e) = std::fs::remove_file(&path) {
+            temporaries::unregister(&path);
+            return Err(DatasetError::io(&path, e));
+        }
+    }
+    if cfg!(unix) || opened.is_err() {
+        temporaries::unregister(&path);
+    }
+    opened.map_err(|e| DatasetError::io(&path, e))
+}

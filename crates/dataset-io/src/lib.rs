@@ -38,7 +38,7 @@ mod times;
 mod writer;
 mod zipimages;
 
-pub use atomic::{check_output_file, read_text, write_atomic, write_atomic_with};
+pub use atomic::{check_output_file, read_text, scratch_file, write_atomic, write_atomic_with};
 pub use error::DatasetError;
 pub use outdir::OutputDir;
 pub use png::{

@@ -139,3 +139,25 @@ fn temporaries_are_listed_while_in_flight_and_stale_ones_removed() {
     let e = OutputDir::check(&d.join("no/such/out"), false).unwrap_err();
     assert!(e.to_string().contains("does not exist"), "{e}");
 }
+
+/// A scratch file reads back what was written at any offset and leaves nothing in its
+/// folder, even while open; a folder that does not exist is an error that names it.
+#[test]
+fn scratch_file_leaves_nothing_behind() {
+    let dir = tmp("scratch");
+    let file = dataset_io::scratch_file(&dir).unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileExt;
+        file.write_all_at(b"samples", 1 << 20).unwrap();
+        let mut back = [0u8; 7];
+        file.read_exact_at(&mut back, 1 << 20).unwrap();
+        assert_eq!(&back, b"samples");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+    }
+    drop(file);
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+    let missing = dir.join("missing");
+    let e = dataset_io::scratch_file(&missing).unwrap_err();
+    assert!(e.to_string().contains("missing"), "{e}");
+}

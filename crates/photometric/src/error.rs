@@ -102,6 +102,9 @@ pub enum PhotometricError {
         /// What it can be.
         expected: &'static str,
     },
+    /// The scratch file of a calibration could not be written or read.
+    #[error("{0}")]
+    Scratch(String),
     /// An error of the camera model (rectification).
     #[error(transparent)]
     Camera(#[from] camera_model::CameraError),

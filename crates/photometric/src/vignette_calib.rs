@@ -104,6 +104,15 @@ pub trait PlaneFrames: Sync {
     }
     /// Frame `i`.
     fn frame(&self, i: usize) -> Result<PlaneFrame, PhotometricError>;
+    /// A new, empty file, read and written at offsets, for the frames' samples when they do
+    /// not fit in [`VignetteOptions::memory_mb`] (one byte per pixel and frame, two above 8
+    /// bits): the iterations then read them from it instead of decoding the frames on every
+    /// pass, faster at the same memory. The calibration only reads and writes it; whoever
+    /// makes it sees that it is removed (an unlinked file, say). `Ok(None)`, the default:
+    /// none, decode on every pass.
+    fn scratch(&self) -> std::io::Result<Option<std::fs::File>> {
+        Ok(None)
+    }
 }
 
 /// Options of [`calibrate_vignette`].
@@ -136,8 +145,9 @@ pub struct VignetteOptions {
     /// cross-validation.
     pub smoothing_px: Option<f64>,
     /// The frames' samples are kept in memory for the iterations when they fit in this many
-    /// MiB (one byte per pixel and frame, two above 8 bits); beyond, every pass decodes the
-    /// frames again, and memory does not grow with their number (0: always decode).
+    /// MiB (one byte per pixel and frame, two above 8 bits); beyond, in the scratch file of
+    /// [`PlaneFrames::scratch`], or where the source has none, every pass decodes the frames
+    /// again. Either way memory does not grow with their number (0: never in memory).
     pub memory_mb: usize,
 }
 
@@ -1466,7 +1476,9 @@ struct View {
 
 /// The samples of every frame with a plane pose in the visiting order of a problem, block
 /// by block ([`Problem::blocks`]) and in a block frame by frame: a pass over a block reads
-/// them in a row. Built when they fit in [`VignetteOptions::memory_mb`]; else every pass
+/// them in a row. In memory when they fit in [`VignetteOptions::memory_mb`], else in the
+/// scratch file of [`PlaneFrames::scratch`] when there is one (read back a chunk of blocks
+/// at a time: memory stays flat at any number of frames); without either, every pass
 /// decodes the frames again.
 struct Store {
     views: Vec<View>,
@@ -1479,34 +1491,135 @@ struct Store {
 enum StoreData {
     U8(Vec<u8>),
     U16(Vec<u16>),
+    /// In a file, little-endian samples of one byte or (`wide`) two.
+    File {
+        file: std::fs::File,
+        wide: bool,
+    },
 }
 
-/// The samples of one block of one frame.
+/// The samples of one block of one frame, or of all frames of a block.
 #[derive(Clone, Copy)]
 enum SamplesRef<'a> {
     U8(&'a [u8]),
     U16(&'a [u16]),
 }
 
-impl Store {
-    /// An empty store for the frames of `p` with `bits`-bit samples, if it fits in `budget`
-    /// bytes.
-    fn new(p: &Problem<'_>, bits: u32, budget: usize) -> Option<Store> {
-        let room = p.frames.len();
-        let n = room.checked_mul(p.order.len())?;
-        let wide = bits > 8;
-        if n.checked_mul(if wide { 2 } else { 1 })? > budget {
-            return None;
+impl SamplesRef<'_> {
+    /// The samples `range` of these.
+    fn slice(&self, range: std::ops::Range<usize>) -> SamplesRef<'_> {
+        match self {
+            SamplesRef::U8(d) => SamplesRef::U8(&d[range]),
+            SamplesRef::U16(d) => SamplesRef::U16(&d[range]),
         }
-        Some(Store {
-            views: Vec::with_capacity(room),
-            room,
-            data: if wide {
+    }
+}
+
+/// Samples a job reads from a store's file at a time (whole blocks, at least one).
+const CHUNK_SAMPLES: usize = 4 << 20;
+
+/// The part of a file-backed store a job has read ([`Store::block`]).
+#[derive(Default)]
+struct Chunk {
+    /// The position in the store of the first sample held.
+    start: usize,
+    bytes: Vec<u8>,
+    wide: Vec<u16>,
+}
+
+/// The error of the scratch file.
+fn scratch_error(what: &str, bytes: usize, e: std::io::Error) -> PhotometricError {
+    PhotometricError::Scratch(format!(
+        "{what} the scratch file that holds the frames' samples ({} MiB in all; raise memory_mb to keep them in memory, or free disk space): {e}",
+        bytes.div_ceil(1 << 20)
+    ))
+}
+
+#[cfg(unix)]
+fn read_at(file: &std::fs::File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+}
+
+#[cfg(unix)]
+fn write_at(file: &std::fs::File, buf: &[u8], offset: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::write_all_at(file, buf, offset)
+}
+
+#[cfg(windows)]
+fn read_at(file: &std::fs::File, mut buf: &mut [u8], mut offset: u64) -> std::io::Result<()> {
+    while !buf.is_empty() {
+        match std::os::windows::fs::FileExt::seek_read(file, buf, offset)? {
+            0 => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+            n => {
+                buf = &mut buf[n..];
+                offset += n as u64;
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(windows)]
+fn write_at(file: &std::fs::File, mut buf: &[u8], mut offset: u64) -> std::io::Result<()> {
+    while !buf.is_empty() {
+        match std::os::windows::fs::FileExt::seek_write(file, buf, offset)? {
+            0 => return Err(std::io::ErrorKind::WriteZero.into()),
+            n => {
+                buf = &buf[n..];
+                offset += n as u64;
+            }
+        }
+    }
+    Ok(())
+}
+
+impl Store {
+    /// An empty store for the frames of `p` with `bits`-bit samples: in memory if it fits in
+    /// `budget` bytes, else in the file `scratch` gives, if it gives one.
+    fn new(
+        p: &Problem<'_>,
+        bits: u32,
+        budget: usize,
+        scratch: &dyn Fn() -> std::io::Result<Option<std::fs::File>>,
+    ) -> Result<Option<Store>, PhotometricError> {
+        let room = p.frames.len();
+        let wide = bits > 8;
+        let Some(bytes) = room
+            .checked_mul(p.order.len())
+            .and_then(|n| n.checked_mul(if wide { 2 } else { 1 }))
+        else {
+            return Ok(None);
+        };
+        let n = room * p.order.len();
+        let data = if bytes <= budget {
+            if wide {
                 StoreData::U16(vec![0; n])
             } else {
                 StoreData::U8(vec![0; n])
-            },
-        })
+            }
+        } else {
+            let Some(file) = scratch().map_err(|e| scratch_error("cannot open", bytes, e))? else {
+                return Ok(None);
+            };
+            // the room of frames without a pose is never written: the file has its size
+            file.set_len(bytes as u64)
+                .map_err(|e| scratch_error("cannot size", bytes, e))?;
+            StoreData::File { file, wide }
+        };
+        Ok(Some(Store {
+            views: Vec::with_capacity(room),
+            room,
+            data,
+        }))
+    }
+
+    /// The bytes the store holds in memory.
+    fn memory_bytes(&self) -> usize {
+        match &self.data {
+            StoreData::U8(d) => d.len(),
+            StoreData::U16(d) => 2 * d.len(),
+            StoreData::File { .. } => 0,
+        }
     }
 
     /// Where the samples of view `v` of `block` start.
@@ -1514,25 +1627,88 @@ impl Store {
         block.start * self.room + v * block.len()
     }
 
-    /// The samples of view `v` of `block`.
-    fn block(&self, block: &std::ops::Range<usize>, v: usize) -> SamplesRef<'_> {
-        let a = self.at(block, v);
+    /// The samples of every view of `block` (view `v` at `v * block.len()`), from memory or
+    /// through `chunk` from the file, which reads ahead up to the block ending at `end`.
+    fn block<'b>(
+        &'b self,
+        block: &std::ops::Range<usize>,
+        end: usize,
+        chunk: &'b mut Chunk,
+    ) -> Result<SamplesRef<'b>, PhotometricError> {
+        let (a, n) = (self.at(block, 0), block.len() * self.room);
         match &self.data {
-            StoreData::U8(d) => SamplesRef::U8(&d[a..a + block.len()]),
-            StoreData::U16(d) => SamplesRef::U16(&d[a..a + block.len()]),
+            StoreData::U8(d) => Ok(SamplesRef::U8(&d[a..a + n])),
+            StoreData::U16(d) => Ok(SamplesRef::U16(&d[a..a + n])),
+            StoreData::File { file, wide } => {
+                let held = if *wide {
+                    chunk.wide.len()
+                } else {
+                    chunk.bytes.len()
+                };
+                if a < chunk.start || a + n > chunk.start + held {
+                    let to = (a + CHUNK_SAMPLES.max(n)).min(end * self.room).max(a + n);
+                    let size = if *wide { 2 } else { 1 };
+                    chunk.start = a;
+                    chunk.bytes.resize((to - a) * size, 0);
+                    read_at(file, &mut chunk.bytes, (a * size) as u64).map_err(|e| {
+                        scratch_error("cannot read", self.room * self.views.len() * size, e)
+                    })?;
+                    if *wide {
+                        chunk.wide.clear();
+                        chunk.wide.extend(
+                            chunk
+                                .bytes
+                                .chunks_exact(2)
+                                .map(|b| u16::from_le_bytes([b[0], b[1]])),
+                        );
+                    }
+                }
+                let r = a - chunk.start..a - chunk.start + n;
+                Ok(if *wide {
+                    SamplesRef::U16(&chunk.wide[r])
+                } else {
+                    SamplesRef::U8(&chunk.bytes[r])
+                })
+            }
         }
     }
 
     /// Adds the prepared frames `frames` (frame index, samples, and their geometry on this
     /// store's problem `p`) as the next views.
-    fn add(&mut self, p: &Problem<'_>, frames: &[(usize, &Samples, Geom)]) {
+    fn add(
+        &mut self,
+        p: &Problem<'_>,
+        frames: &[(usize, &Samples, Geom)],
+    ) -> Result<(), PhotometricError> {
         let (first, room) = (self.views.len(), self.room);
         match &mut self.data {
             StoreData::U8(d) => fill_blocks(d, p, room, first, frames, |v| v as u8),
             StoreData::U16(d) => fill_blocks(d, p, room, first, frames, |v| v),
+            StoreData::File { file, wide } => {
+                let (file, wide) = (&*file, *wide);
+                let size = if wide { 2 } else { 1 };
+                p.blocks.par_iter().try_for_each(|b| {
+                    let pix = &p.ordered_pix[b.clone()];
+                    let mut bytes = Vec::with_capacity(frames.len() * b.len() * size);
+                    for (_, samples, _) in frames {
+                        for &q in pix {
+                            let v = samples.get(q as usize);
+                            if wide {
+                                bytes.extend_from_slice(&v.to_le_bytes());
+                            } else {
+                                bytes.push(v as u8);
+                            }
+                        }
+                    }
+                    let at = b.start * room + first * b.len();
+                    write_at(file, &bytes, (at * size) as u64)
+                        .map_err(|e| scratch_error("cannot write", room * p.order.len() * size, e))
+                })?;
+            }
         }
         self.views
             .extend(frames.iter().map(|&(i, _, geom)| View { i, geom }));
+        Ok(())
     }
 }
 
@@ -1584,14 +1760,12 @@ fn load(
     let n = graph_problem.frames.len();
     let bits = graph_problem.u.len().trailing_zeros();
     let mut left = budget;
-    let mut stores: Vec<Option<Store>> = problems
-        .iter()
-        .map(|p| {
-            let s = Store::new(p, bits, left)?;
-            left -= s.room * p.order.len() * if bits > 8 { 2 } else { 1 };
-            Some(s)
-        })
-        .collect();
+    let mut stores: Vec<Option<Store>> = Vec::with_capacity(problems.len());
+    for p in problems {
+        let s = Store::new(p, bits, left, &|| p.frames.scratch())?;
+        left -= s.as_ref().map_or(0, Store::memory_bytes);
+        stores.push(s);
+    }
     let mut graph = Graph::new(graph_problem);
     let indices: Vec<usize> = (0..n).collect();
     for chunk in indices.chunks(LOAD_CHUNK.max(rayon::current_num_threads())) {
@@ -1616,7 +1790,7 @@ fn load(
                         .map(|g| (*i, &pf.samples, g))
                 })
                 .collect();
-            store.add(p, &frames);
+            store.add(p, &frames)?;
         }
     }
     Ok((graph.finish(), stores))
@@ -1765,7 +1939,10 @@ fn store_pass(
                 1
             });
             let mut splats = Splats::new(if visit != Visit::V { cells_needed } else { 0 }, p.grid);
+            let mut chunk = Chunk::default();
+            let job_end = range.end;
             for block in blocks {
+                let samples = store.block(block, job_end, &mut chunk)?;
                 // the views in the order of where the block lands on the plane (a Morton
                 // order of its first pixel's cell tile): neighbouring views gather and splat
                 // on neighbouring cells
@@ -1787,7 +1964,7 @@ fn store_pass(
                     let slot = if visit == Visit::Fused { vo * len } else { 0 };
                     let st = stats.then_some((&mut acc.v, view.i % 2 == 1));
                     let (b, out) = (&mut blk, &mut dense);
-                    let nobs = match store.block(block, vi as usize) {
+                    let nobs = match samples.slice(vi as usize * len..(vi as usize + 1) * len) {
                         SamplesRef::U8(d) => {
                             ctx.dense(geom, d, block.clone(), v_blk, b, st, out, slot)
                         }

@@ -2,8 +2,8 @@
 use crate::plane_frames::{set, Frames};
 use camera_model::{CameraFile, Image, ImageSize};
 use photometric::{
-    calibrate_vignette, vignette_errors, InverseResponse, PhotometricError, PlaneImage,
-    VignetteCalibration, VignetteOptions,
+    calibrate_vignette, vignette_errors, InverseResponse, PhotometricError, PlaneFrames,
+    PlaneImage, VignetteCalibration, VignetteOptions,
 };
 use synthetic::plane::{PlaneConfig, PlaneSequence};
 use synthetic::sensor::{NoiseLevel, Sensor};
@@ -137,15 +137,7 @@ fn results_do_not_depend_on_the_number_of_threads() {
         pool.install(|| calibrate(&f).unwrap())
     };
     let (a, b) = (run(1), run(2));
-    let bits = |i: &Image<f32>| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-    assert!(bits(&a.vignette) == bits(&b.vignette), "vignette");
-    assert!(bits(&a.raw) == bits(&b.raw), "raw map");
-    assert!(bits(&a.std_error) == bits(&b.std_error), "standard error");
-    assert_eq!(a.counts.data(), b.counts.data());
-    assert_eq!(
-        (a.iterations, a.outliers, a.smoothing.sigma_px.to_bits()),
-        (b.iterations, b.outliers, b.smoothing.sigma_px.to_bits())
-    );
+    same_bits(&a, &b);
 }
 
 /// Frames in memory (one visit of the data per iteration, V and C steps fused) and frames
@@ -373,4 +365,123 @@ fn eight_bit_values_in_sixteen_bit_samples_give_the_same_bits() {
     assert!(bits(&a.vignette) == bits(&b.vignette), "vignette");
     assert!(bits(&a.raw) == bits(&b.raw), "raw map");
     assert_eq!(a.iterations, b.iterations);
+}
+
+/// The frames of `0` with a scratch file for their samples (created in the system's
+/// temporary folder and unlinked at once, as a caller of the library would make it; each
+/// call a new one).
+struct Spilled<'a>(&'a Frames);
+
+impl PlaneFrames for Spilled<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, PhotometricError> {
+        self.0.frame(i)
+    }
+    fn scratch(&self) -> std::io::Result<Option<std::fs::File>> {
+        static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path = std::env::temp_dir().join(format!(
+            "photometric-scratch-test-{}-{n}",
+            std::process::id()
+        ));
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)?;
+        std::fs::remove_file(&path)?;
+        Ok(Some(file))
+    }
+}
+
+fn same_bits(a: &VignetteCalibration, b: &VignetteCalibration) {
+    let bits = |i: &Image<f32>| i.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert!(bits(&a.vignette) == bits(&b.vignette), "vignette");
+    assert!(bits(&a.raw) == bits(&b.raw), "raw map");
+    assert!(bits(&a.std_error) == bits(&b.std_error), "standard error");
+    assert_eq!(a.counts.data(), b.counts.data());
+    assert_eq!(
+        (a.iterations, a.outliers, a.smoothing.sigma_px.to_bits()),
+        (b.iterations, b.outliers, b.smoothing.sigma_px.to_bits())
+    );
+}
+
+/// Samples beyond the memory budget go to the source's scratch file and are read back from
+/// it: the same bits as with all of them in memory, 8-bit (only the full stage's samples
+/// in the file: the coarse stage's fit in 1 MiB) and 12-bit (both stages' in files), with
+/// frames that see no plane leaving their room in the file unwritten (the last one here).
+#[test]
+fn samples_in_a_scratch_file_give_the_same_bits_as_in_memory() {
+    let away = |f: &mut Frames| {
+        let last = f.seq.poses.len() - 1;
+        f.seq.poses[last].t = [0.0, 0.0, -3.0];
+    };
+    let mut eight = set(12, 240, 192, 40, Sensor::preset(NoiseLevel::Typical));
+    away(&mut eight);
+    let mut deep = deep_set(12, 240, 192, 40, NoiseLevel::Typical, 12);
+    away(&mut deep);
+    for (f, bits, spill_mb) in [(&eight, 8, 1), (&deep, 12, 0)] {
+        let (w, h) = (f.seq.config.width, f.seq.config.height);
+        let cam = CameraFile::parse(&f.seq.camera.camera_txt((w, h))).unwrap();
+        let response = if bits == 8 {
+            InverseResponse::new(f.seq.response).unwrap()
+        } else {
+            InverseResponse::from_values(f.seq.response_bits(bits)).unwrap()
+        };
+        let run = |frames: &dyn PlaneFrames, memory_mb: usize| {
+            let options = VignetteOptions {
+                memory_mb,
+                ..VignetteOptions::default()
+            };
+            let size = ImageSize::new(w, h);
+            calibrate_vignette(&cam.input, size, &response, frames, &options, &|_, _| {}).unwrap()
+        };
+        let (memory, file) = (run(f, 160), run(&Spilled(f), spill_mb));
+        same_bits(&memory, &file);
+    }
+}
+
+/// A scratch file that cannot be made stops the calibration with what happened and what to
+/// do, not a panic or a silent slow path.
+#[test]
+fn a_scratch_file_that_cannot_be_opened_is_an_error() {
+    struct NoSpace<'a>(&'a Frames);
+    impl PlaneFrames for NoSpace<'_> {
+        fn len(&self) -> usize {
+            self.0.len()
+        }
+        fn frame(&self, i: usize) -> Result<photometric::PlaneFrame, PhotometricError> {
+            self.0.frame(i)
+        }
+        fn scratch(&self) -> std::io::Result<Option<std::fs::File>> {
+            Err(std::io::Error::other("no space left on the test's device"))
+        }
+    }
+    let f = set(7, 64, 48, 4, Sensor::preset(NoiseLevel::Low));
+    let (w, h) = (f.seq.config.width, f.seq.config.height);
+    let cam = CameraFile::parse(&f.seq.camera.camera_txt((w, h))).unwrap();
+    let options = VignetteOptions {
+        memory_mb: 0,
+        ..VignetteOptions::default()
+    };
+    let response = InverseResponse::new(f.seq.response).unwrap();
+    let e = calibrate_vignette(
+        &cam.input,
+        ImageSize::new(w, h),
+        &response,
+        &NoSpace(&f),
+        &options,
+        &|_, _| {},
+    )
+    .unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, PhotometricError::Scratch(_)), "{e}");
+    assert!(
+        text.contains("scratch file")
+            && text.contains("no space left")
+            && text.contains("memory_mb"),
+        "{text}"
+    );
 }

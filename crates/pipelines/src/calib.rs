@@ -300,12 +300,14 @@ pub fn response_figure(
 }
 
 /// Frames of a sequence with poses, decoded when the calibration asks (it keeps what it
-/// needs in memory when that fits its `memory_mb`, else asks again on every pass). 16-bit
+/// needs in memory when that fits its `memory_mb`, else in a scratch file in `scratch`, else
+/// asks again on every pass). 16-bit
 /// frames are `bits`-bit samples after a right shift by `shift` (see [`deep_layout`]).
 struct SequencePlaneFrames<'a> {
     seq: &'a Sequence,
     frames: Vec<(usize, f64, photometric::PlanePose)>,
     deep: Option<DeepLayout>,
+    scratch: Option<&'a Path>,
 }
 
 /// The bit depth of the samples of a 16-bit sequence and the shift that brings them to the
@@ -371,6 +373,11 @@ impl photometric::PlaneFrames for SequencePlaneFrames<'_> {
             exposure_ms,
             pose,
         })
+    }
+    fn scratch(&self) -> std::io::Result<Option<std::fs::File>> {
+        self.scratch
+            .map(|dir| dataset_io::scratch_file(dir).map_err(std::io::Error::other))
+            .transpose()
     }
 }
 
@@ -652,6 +659,11 @@ pub struct VignetteJob {
     pub bit_depth: Option<u32>,
     /// The calibration options.
     pub options: photometric::VignetteOptions,
+    /// The folder for a scratch file (hidden, removed at once) that holds the frames'
+    /// samples when they exceed `options.memory_mb`, so that the iterations read them back
+    /// instead of decoding every frame on every pass (`monovo calib vignette` gives the
+    /// output's folder). `None`: decode on every pass.
+    pub scratch: Option<PathBuf>,
 }
 
 /// A vignette calibration of a sequence, as `monovo calib vignette` runs it.
@@ -693,7 +705,7 @@ impl VignetteRun {
 
 /// Poses (from the marker or the poses file) and the calibration, without writing anything:
 /// the calibration keeps the frames in memory when they fit in its `memory_mb` (80 MiB by
-/// default), else decodes them on every pass.
+/// default), else in a scratch file in `job.scratch`, else decodes them on every pass.
 /// Progress goes to `observer` (stages as `begin`/`advance`, iterations as `status`).
 pub fn calibrate_vignette_sequence(
     job: &VignetteJob,
@@ -763,6 +775,7 @@ pub fn calibrate_vignette_sequence(
         seq: &seq,
         frames,
         deep,
+        scratch: a.scratch.as_deref(),
     };
     observer.status("calibrating");
     let cal = photometric::calibrate_vignette(

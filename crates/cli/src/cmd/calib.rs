@@ -369,6 +369,12 @@ pub fn vignette_job(a: &VignetteArgs) -> Result<VignetteJob> {
         marker_id: a.marker_id,
         bit_depth: a.bit_depth,
         options: vignette_options(a)?,
+        // beside the output: a place the user chose to write to
+        scratch: Some(
+            a.output
+                .parent()
+                .map_or_else(|| ".".into(), |d| d.to_path_buf()),
+        ),
     })
 }
 

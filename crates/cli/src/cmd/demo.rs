@@ -149,6 +149,7 @@ pub fn run(args: &Args) -> Result<()> {
             marker_id: 213,
             bit_depth: None,
             options: photometric::VignetteOptions::default(),
+            scratch: Some(dir.clone()),
         },
         &monovo_pipelines::Silent,
     )?;
