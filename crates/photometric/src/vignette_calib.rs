@@ -1491,10 +1491,11 @@ struct Store {
 enum StoreData {
     U8(Vec<u8>),
     U16(Vec<u16>),
-    /// In a file, little-endian samples of one byte or (`wide`) two.
+    /// In a file of `bytes`, little-endian samples of one byte or (`wide`) two.
     File {
         file: std::fs::File,
         wide: bool,
+        bytes: usize,
     },
 }
 
@@ -1575,13 +1576,8 @@ fn write_at(file: &std::fs::File, mut buf: &[u8], mut offset: u64) -> std::io::R
 
 impl Store {
     /// An empty store for the frames of `p` with `bits`-bit samples: in memory if it fits in
-    /// `budget` bytes, else in the file `scratch` gives, if it gives one.
-    fn new(
-        p: &Problem<'_>,
-        bits: u32,
-        budget: usize,
-        scratch: &dyn Fn() -> std::io::Result<Option<std::fs::File>>,
-    ) -> Result<Option<Store>, PhotometricError> {
+    /// `budget` bytes, else in the scratch file of `p`'s frames, if they give one.
+    fn new(p: &Problem<'_>, bits: u32, budget: usize) -> Result<Option<Store>, PhotometricError> {
         let room = p.frames.len();
         let wide = bits > 8;
         let Some(bytes) = room
@@ -1598,13 +1594,17 @@ impl Store {
                 StoreData::U8(vec![0; n])
             }
         } else {
-            let Some(file) = scratch().map_err(|e| scratch_error("cannot open", bytes, e))? else {
+            let Some(file) = p
+                .frames
+                .scratch()
+                .map_err(|e| scratch_error("cannot open", bytes, e))?
+            else {
                 return Ok(None);
             };
             // the room of frames without a pose is never written: the file has its size
             file.set_len(bytes as u64)
                 .map_err(|e| scratch_error("cannot size", bytes, e))?;
-            StoreData::File { file, wide }
+            StoreData::File { file, wide, bytes }
         };
         Ok(Some(Store {
             views: Vec::with_capacity(room),
@@ -1639,7 +1639,7 @@ impl Store {
         match &self.data {
             StoreData::U8(d) => Ok(SamplesRef::U8(&d[a..a + n])),
             StoreData::U16(d) => Ok(SamplesRef::U16(&d[a..a + n])),
-            StoreData::File { file, wide } => {
+            StoreData::File { file, wide, bytes } => {
                 let held = if *wide {
                     chunk.wide.len()
                 } else {
@@ -1650,9 +1650,8 @@ impl Store {
                     let size = if *wide { 2 } else { 1 };
                     chunk.start = a;
                     chunk.bytes.resize((to - a) * size, 0);
-                    read_at(file, &mut chunk.bytes, (a * size) as u64).map_err(|e| {
-                        scratch_error("cannot read", self.room * self.views.len() * size, e)
-                    })?;
+                    read_at(file, &mut chunk.bytes, (a * size) as u64)
+                        .map_err(|e| scratch_error("cannot read", *bytes, e))?;
                     if *wide {
                         chunk.wide.clear();
                         chunk.wide.extend(
@@ -1684,8 +1683,8 @@ impl Store {
         match &mut self.data {
             StoreData::U8(d) => fill_blocks(d, p, room, first, frames, |v| v as u8),
             StoreData::U16(d) => fill_blocks(d, p, room, first, frames, |v| v),
-            StoreData::File { file, wide } => {
-                let (file, wide) = (&*file, *wide);
+            StoreData::File { file, wide, bytes } => {
+                let (file, wide, total) = (&*file, *wide, *bytes);
                 let size = if wide { 2 } else { 1 };
                 p.blocks.par_iter().try_for_each(|b| {
                     let pix = &p.ordered_pix[b.clone()];
@@ -1702,7 +1701,7 @@ impl Store {
                     }
                     let at = b.start * room + first * b.len();
                     write_at(file, &bytes, (at * size) as u64)
-                        .map_err(|e| scratch_error("cannot write", room * p.order.len() * size, e))
+                        .map_err(|e| scratch_error("cannot write", total, e))
                 })?;
             }
         }
@@ -1762,7 +1761,7 @@ fn load(
     let mut left = budget;
     let mut stores: Vec<Option<Store>> = Vec::with_capacity(problems.len());
     for p in problems {
-        let s = Store::new(p, bits, left, &|| p.frames.scratch())?;
+        let s = Store::new(p, bits, left)?;
         left -= s.as_ref().map_or(0, Store::memory_bytes);
         stores.push(s);
     }
