@@ -491,8 +491,9 @@ pub(crate) fn choose_smoothing(
                 };
                 (r, score, sem)
             };
-            let scored: Vec<(usize, f64, f64)> =
-                candidates.par_iter().map(|&r| score_of(r)).collect();
+            // (one after the other: each one's blurs are in parallel, and two at once would
+            // hold twice the memory, some 20 full-size maps each)
+            let scored: Vec<(usize, f64, f64)> = candidates.iter().map(|&r| score_of(r)).collect();
             for &(r, score, _) in &scored {
                 scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
             }
@@ -525,23 +526,17 @@ pub(crate) fn choose_smoothing(
     };
     // the map, and the halves smoothed as the whole is (for the variance's scale and the
     // bias below)
-    let mut batch = if radius > 0 {
-        local_linear_many(
-            &[(raw, true), (odd, false), (even, false)],
-            &wt,
-            w,
-            h,
-            radius,
-        )
-    } else {
-        local_linear_many(&[(raw, true)], &wt, w, h, radius)
-    };
-    let halves = (batch.len() == 3).then(|| {
+    // (the halves in a batch of their own: all three at once would hold some 30 full-size
+    // blurs; the numbers are the same)
+    let halves = (radius > 0).then(|| {
+        let mut batch = local_linear_many(&[(odd, false), (even, false)], &wt, w, h, radius);
         let (se, _) = batch.pop().unwrap_or_default();
         let (so, _) = batch.pop().unwrap_or_default();
         (so, se)
     });
-    let (mut smoothed, mut var) = batch.pop().unwrap_or_default();
+    let (mut smoothed, mut var) = local_linear_many(&[(raw, true)], &wt, w, h, radius)
+        .pop()
+        .unwrap_or_default();
     // the variance above treats pixels as independent; JPEG's 8x8 blocks and the shared
     // plane irradiance correlate neighbours. The same smoothing of the odd and of the even
     // half differs by noise alone: its spread calibrates the smoothed map's variance
