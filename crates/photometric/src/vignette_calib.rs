@@ -2726,17 +2726,20 @@ fn solve(
         // of the outlier set as V moves, so that they jump by up to several times their
         // value between iterations and would hold up the convergence of the rest (with
         // more than half of the pixels found defective, all of them count)
-        let observed = || {
-            new_v
+        let observed: Vec<(f64, bool)> = new_v
+            .iter()
+            .zip(&old_v)
+            .zip(vs.den.iter().zip(&defective))
+            .filter(|(_, (d, _))| **d > 0.0)
+            .map(|((a, b), (_, bad))| (((a - b) / b).abs(), *bad))
+            .collect();
+        let all = 2 * observed.iter().filter(|(_, bad)| !bad).count() <= observed.len();
+        let counted = || {
+            observed
                 .iter()
-                .zip(&old_v)
-                .zip(vs.den.iter().zip(&defective))
-                .filter(|(_, (d, _))| **d > 0.0)
-                .map(|((a, b), (_, bad))| (((a - b) / b).abs(), *bad))
+                .filter(|(_, bad)| all || !bad)
+                .map(|(c, _)| *c)
         };
-        let good = observed().filter(|(_, bad)| !bad).count();
-        let all = 2 * good <= observed().count();
-        let counted = || observed().filter(|(_, bad)| all || !bad).map(|(c, _)| c);
         let bound = erratic_bound(counted());
         let (s2, n2) = counted()
             .filter(|c| *c <= bound)
