@@ -2183,19 +2183,8 @@ impl<'p, 'a> Graph<'p, 'a> {
 /// much coarser.
 const COARSE_STRIDE: usize = 4;
 
-/// The coarse stage's tolerance. It must bring the fine stage near its solution in the
-/// smooth trades between `V` and `C` (the centre of the image against the plane around the
-/// marker, which the camera always looks at): the fine stage converges on those at a rate
-/// near 1, while a coarse iteration costs a sixteenth of a fine one. Stopped at 2e-4, the
-/// coarse stage left a bowl of about 3e-3 between the image's centre and its border that the
-/// fine stage took five or more passes to undo (and stopped before it had, on its slow
-/// change).
-const COARSE_TOLERANCE: f64 = 1e-5;
-
-/// The fine stage (warm-started) takes plain fixed-point steps while each change is at most
-/// this fraction of the one before (a contraction: the change bounds the error left); when
-/// it crawls, with a change above it, Anderson's mixing steps in, and the stop rule waits.
-const CRAWL_RATIO: f64 = 0.75;
+/// The coarse stage only needs to bring the fine one near its solution.
+const COARSE_TOLERANCE: f64 = 2e-4;
 
 /// Iterations Anderson mixing remembers.
 const ANDERSON_MEMORY: usize = 5;
@@ -2596,12 +2585,10 @@ struct Stage {
     stats: Option<VSums>,
 }
 
-/// Alternates V and C steps on `problem` until the RMS relative change of `V` is below
-/// `tolerance`. From scratch (`warm = None`) the noise model follows the residuals for the
-/// first iterations and outliers are dropped after a few, and every step is
-/// Anderson-accelerated; from a warm start (`V` and the noise model of a coarser stage) both
-/// are fixed from the start, and the steps are plain unless the iteration crawls
-/// ([`CRAWL_RATIO`]).
+/// Alternates V and C steps (Anderson-accelerated) on `problem` until the RMS relative
+/// change of `V` is below `tolerance`. From scratch (`warm = None`) the noise model follows
+/// the residuals for the first iterations and outliers are dropped after a few; from a warm
+/// start (`V` and the noise model of a coarser stage) both are fixed from the start.
 fn solve(
     problem: &Problem<'_>,
     store: Option<&Store>,
@@ -2724,22 +2711,7 @@ fn solve(
         x.extend(model.c.iter().map(|&c| c as f64));
         let mut g: Vec<f64> = model.v.clone();
         g.extend(gc.iter().map(|&c| c as f64));
-        // a warm start from the converged coarse stage is near the solution in the smooth
-        // trades; what is left converges at a steady rate, which the mixing, fitted to
-        // residuals where a few pixels' outlier sets flicker, only upsets (six fine passes
-        // instead of four on 200 frames of 1280x1024, and no more accurate). The mixing
-        // still sees every iterate, and takes over when the iteration crawls.
-        let crawling = crawls(&change);
-        let next = if it >= 1 {
-            let mixed = anderson.step(&x, &g);
-            if warm_start && !crawling {
-                g
-            } else {
-                mixed
-            }
-        } else {
-            g
-        };
+        let next = if it >= 1 { anderson.step(&x, &g) } else { g };
         let (nv, nc) = next.split_at(npx);
         let mut new_v: Vec<f64> = nv.to_vec();
         for (v, d) in new_v.iter_mut().zip(&vs.den) {
@@ -2792,8 +2764,7 @@ fn solve(
             anderson.reset();
         }
         let enough = tolerance.max(noise_tolerance * median_std_error(&model.v, &vs.den));
-        // (a crawling fine stage's small change is no bound on the error it leaves)
-        if fixed && delta < enough && !(warm_start && crawls(&change)) {
+        if fixed && delta < enough {
             converged = true;
             if stats {
                 final_stats = Some(vs);
@@ -2810,11 +2781,6 @@ fn solve(
         change,
         stats: final_stats,
     })
-}
-
-/// Whether the last change of `change` is more than [`CRAWL_RATIO`] times the one before.
-fn crawls(change: &[f64]) -> bool {
-    matches!(change, [.., a, b] if *b > CRAWL_RATIO * *a)
 }
 
 /// The median relative standard error of the raw map `v` from the normal equations (`1 /
@@ -3120,20 +3086,6 @@ mod tests {
         // small changes: the floor
         let tiny = (1..=1000).map(|i| i as f64 * 1e-9);
         assert_eq!(erratic_bound(tiny), ERRATIC_FLOOR);
-    }
-
-    #[test]
-    fn an_iteration_crawls_when_its_change_shrinks_by_less_than_a_quarter() {
-        // fewer than two changes: no rate yet
-        assert!(!crawls(&[]));
-        assert!(!crawls(&[1e-3]));
-        // a contraction by 0.5 or exactly CRAWL_RATIO: plain steps, the stop rule applies
-        assert!(!crawls(&[2e-3, 1.7e-4, 8.5e-5]));
-        assert!(!crawls(&[1e-4, CRAWL_RATIO * 1e-4]));
-        // 0.81: crawling (the fine stage after a coarse stage stopped too early)
-        assert!(crawls(&[1.1e-4, 8.9e-5]));
-        // a change that grew
-        assert!(crawls(&[6e-5, 2e-4]));
     }
 
     /// A linear iteration `x -> x* + A (x - x*)` with three rates (Anderson mixing with

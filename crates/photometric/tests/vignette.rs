@@ -281,11 +281,9 @@ fn twelve_bit_frames_calibrate_with_the_deep_table() {
         assert!(cal.converged, "{:?}", cal.change);
         // the recommended map's error is mostly low-frequency and varies by +-30% between
         // noise realisations (seeds 11, 13, 14, 15 at high noise: 12-bit / 8-bit = 1.29,
-        // 0.92, 1.32, 1.15) and with where the iteration stops (seed 11, typical noise:
-        // 0.127% / 0.081% = 1.57 as the solver stops, 0.137% / 0.106% = 1.29 iterated to a
-        // change of 1e-8); the raw map's is per-pixel noise and hardly varies
+        // 0.92, 1.32, 1.15); the raw map's is per-pixel noise and hardly varies
         assert!(
-            rms < 0.0025 && rms <= rms8 * 1.6,
+            rms < 0.0025 && rms <= rms8 * 1.5,
             "recommended {rms} (8-bit {rms8})"
         );
         assert!(
