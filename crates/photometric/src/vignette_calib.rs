@@ -2782,9 +2782,9 @@ fn solve(
 /// two of `change` (at the rate between them, at most 1), below twice the stop rule's
 /// `bound`. From a warm start the first change is the step from the coarse stage's V to the
 /// full one's, a decade above the next: a rate taken from it predicted convergence for the
-/// iteration after it every time, which it never was (600 frames of 1280x1024: changes
-/// 1.6e-3, 1.0e-4, ...), and the statistics cost a quarter of a pass for nothing; so the rate
-/// comes from the changes after it.
+/// iteration after it on every set measured, where it never was (600 frames of 1280x1024:
+/// changes 1.6e-3, 1.0e-4, ...), and the statistics cost a quarter of a pass for nothing; so
+/// the rate comes from the changes after it.
 fn looks_last(change: &[f64], warm_start: bool, bound: f64) -> bool {
     let settled = if warm_start {
         change.get(1..).unwrap_or_default()
