@@ -570,6 +570,61 @@ impl RectifyMap {
         }
     }
 
+    /// The map of [`RectifyMap::for_mode`] (the same output camera, the same valid pixels) for
+    /// input frames decoded at half their width and height in the DCT domain (`in_size`
+    /// halved, rounded up): pixel `(x, y)` of the full frame is `(x / 2 - 1/4, y / 2 - 1/4)`
+    /// of the half frame, whose pixel `i` is centred on full pixels `2i` and `2i + 1`. Sources
+    /// within a quarter of a half-frame pixel of its border sample the border. The output must
+    /// be at most half the input's width and height (else the full decode is the better
+    /// image): an error otherwise, and for `none`.
+    pub fn for_mode_half_input(
+        input: &CameraModel,
+        in_size: ImageSize,
+        mode: &OutputMode,
+        out_size: ImageSize,
+    ) -> Result<RectifyMap, CameraError> {
+        let in_size = in_size.validate()?;
+        let out_size = out_size.validate()?;
+        let half = ImageSize::new(in_size.width.div_ceil(2), in_size.height.div_ceil(2));
+        if *mode == OutputMode::None
+            || out_size.width > half.width
+            || out_size.height > half.height
+            || half.width < 2
+            || half.height < 2
+        {
+            return Err(CameraError::InvalidValue {
+                line: 0,
+                message: format!(
+                    "half-size decoding needs an output of at most half the input ({half} for {in_size}), and not `none`; asked for `{mode}` at {out_size}"
+                ),
+            });
+        }
+        let k = output_intrinsics(input, in_size, mode, out_size)?;
+        let (hw, hh) = ((half.width - 1) as f64, (half.height - 1) as f64);
+        let to_half = move |s: [f64; 2]| {
+            [
+                (0.5 * s[0] - 0.25).clamp(0.0, hw),
+                (0.5 * s[1] - 0.25).clamp(0.0, hh),
+            ]
+        };
+        if input.is_pinhole() {
+            let ki = input.intrinsics();
+            let ax = ki.fx / k.fx;
+            let ay = ki.fy / k.fy;
+            let bx = ki.cx - ax * k.cx;
+            let by = ki.cy - ay * k.cy;
+            return RectifyMap::build(half, out_size, k, |u, v| {
+                snap_inside([ax * u as f64 + bx, ay * v as f64 + by], in_size).map(to_half)
+            });
+        }
+        RectifyMap::build(half, out_size, k, |u, v| {
+            input
+                .project_normalized(k.pixel_to_normalized([u as f64, v as f64]))
+                .and_then(|s| snap_inside(s, in_size))
+                .map(to_half)
+        })
+    }
+
     /// The output pinhole camera.
     pub fn camera(&self) -> Intrinsics {
         self.camera

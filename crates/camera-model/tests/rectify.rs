@@ -375,3 +375,96 @@ fn crop_sides_are_each_at_their_exact_limit() {
         }
     }
 }
+
+/// A half-size frame whose pixel `(i, j)` holds the full frame's value at `(2i + 1/2, 2j +
+/// 1/2)`, the centre of its 2x2 block (a DCT-domain half-size decode). On a linear ramp,
+/// bilinear sampling is exact, so the half-input map must give the full map's values (the
+/// source coordinate itself, for a ramp in x and one in y) wherever the source is at least a
+/// full pixel inside the border (nearer, it samples the half frame's border). Tolerance 1e-3
+/// px (f32 rounding of coordinates up to 1280); a source off by a quarter pixel, the
+/// centre convention's size, would fail it. The same pixels are valid in both, for every
+/// model and for crop and full.
+#[test]
+fn the_half_input_map_samples_the_same_points_as_the_full_map() {
+    for (model, size) in all_models() {
+        let out = ImageSize::new(size.width / 2 - 3, size.height / 2 - 5);
+        let (hw, hh) = (size.width.div_ceil(2), size.height.div_ceil(2));
+        let ramps = |axis: usize| {
+            let coord = |x: f64, y: f64| (if axis == 0 { x } else { y }) as f32;
+            let full = Image::new(
+                size.width,
+                size.height,
+                (0..size.pixels())
+                    .map(|p| coord((p % size.width) as f64, (p / size.width) as f64))
+                    .collect(),
+            )
+            .unwrap();
+            let half = Image::new(
+                hw,
+                hh,
+                (0..hw * hh)
+                    .map(|p| coord(2.0 * (p % hw) as f64 + 0.5, 2.0 * (p / hw) as f64 + 0.5))
+                    .collect(),
+            )
+            .unwrap();
+            (full, half)
+        };
+        let (fx, hx) = ramps(0);
+        let (fy, hy) = ramps(1);
+        for mode in [OutputMode::Crop, OutputMode::Full] {
+            let Ok(full) = RectifyMap::for_mode(&model, size, &mode, out) else {
+                continue; // `full` of a camera that sees 90 degrees or more: refused alike
+            };
+            let half = RectifyMap::for_mode_half_input(&model, size, &mode, out).unwrap();
+            assert_eq!(half.camera(), full.camera(), "{} {mode}", model.name());
+            assert_eq!(half.invalid_count(), full.invalid_count());
+            assert_eq!(half.input_size(), ImageSize::new(hw, hh));
+            let (ax, bx) = (full.remap_f32(&fx).unwrap(), half.remap_f32(&hx).unwrap());
+            let (ay, by) = (full.remap_f32(&fy).unwrap(), half.remap_f32(&hy).unwrap());
+            let mut compared = 0;
+            for p in 0..out.pixels() {
+                let (x, y) = (ax.data()[p], ay.data()[p]);
+                assert_eq!(x.is_nan(), bx.data()[p].is_nan());
+                let inside = x >= 1.0
+                    && x <= size.width as f32 - 2.0
+                    && y >= 1.0
+                    && y <= size.height as f32 - 2.0;
+                if x.is_finite() && inside {
+                    let (ex, ey) = ((x - bx.data()[p]).abs(), (y - by.data()[p]).abs());
+                    assert!(
+                        ex < 1e-3 && ey < 1e-3,
+                        "{} {mode}: source ({x}, {y}), from the half frame ({}, {})",
+                        model.name(),
+                        bx.data()[p],
+                        by.data()[p]
+                    );
+                    compared += 1;
+                }
+            }
+            assert!(compared > out.pixels() / 2, "{compared}");
+        }
+    }
+}
+
+/// Half-size decoding is for outputs of at most half the input, and never for `none`.
+#[test]
+fn the_half_input_map_refuses_an_output_larger_than_half_the_input() {
+    let f = dataset_camera();
+    for (mode, out) in [
+        (OutputMode::Crop, ImageSize::new(641, 480)),
+        (OutputMode::Crop, ImageSize::new(640, 513)),
+        (OutputMode::None, ImageSize::new(1280, 1024)),
+    ] {
+        let e = RectifyMap::for_mode_half_input(&f.input, f.input_size, &mode, out)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("half") && e.contains("640x512"), "{e}");
+    }
+    assert!(RectifyMap::for_mode_half_input(
+        &f.input,
+        f.input_size,
+        &OutputMode::Crop,
+        ImageSize::new(640, 512)
+    )
+    .is_ok());
+}

@@ -504,3 +504,87 @@ fn compression_none_stores_the_same_pixels() {
         stderr(&o)
     );
 }
+
+/// `--half-decode`: the frames are the half-size decodes (libjpeg-turbo's DCT-domain scaling)
+/// rectified by the half-input map, exactly; they differ from the full path's by about a
+/// grey level on average (a 2x2 mean against a point sample, no bias), with and without the
+/// photometric correction; what it cannot do is refused in one line.
+#[cfg(feature = "turbojpeg")]
+#[test]
+fn half_decode_rectifies_the_half_size_frames() {
+    let d = temp_dir("rectify_half");
+    let raw = Sequence::open(fixture()).unwrap();
+    let cam = raw.camera().unwrap();
+    let map =
+        RectifyMap::for_mode_half_input(&cam.input, cam.input_size, &cam.output, cam.output_size)
+            .unwrap();
+    for photometric in [false, true] {
+        let (half, full) = (
+            d.join(format!("half{photometric}")),
+            d.join(format!("full{photometric}")),
+        );
+        for (out, extra) in [(&half, vec!["--half-decode", "--json"]), (&full, vec![])] {
+            let mut args = vec![
+                "rectify",
+                fixture().to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ];
+            args.extend(&extra);
+            if photometric {
+                args.push("--photometric");
+            }
+            let o = monovo(&args);
+            assert!(o.status.success(), "{}", stderr(&o));
+            if out == &half {
+                let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+                assert_eq!(v["half_decode"], true);
+            }
+        }
+        let (h, f) = (
+            Sequence::open(&half).unwrap(),
+            Sequence::open(&full).unwrap(),
+        );
+        let (mut abs, mut bias, mut n) = (0.0f64, 0.0f64, 0.0f64);
+        for k in 0..8 {
+            let hk = h.decode(k).unwrap();
+            if !photometric {
+                assert_eq!(
+                    hk,
+                    map.remap_u8(&raw.decode_half(k).unwrap()).unwrap(),
+                    "frame {k}"
+                );
+            }
+            for (a, b) in hk.data().iter().zip(f.decode(k).unwrap().data()) {
+                let e = *a as f64 - *b as f64;
+                abs += e.abs();
+                bias += e;
+                n += 1.0;
+            }
+        }
+        let (abs, bias) = (abs / n, bias / n);
+        assert!(
+            abs < 3.0 && bias.abs() < 0.5,
+            "photometric {photometric}: mean |e| {abs}, bias {bias}"
+        );
+    }
+    let seq = copy_of("rectify_half_bad");
+    expect_clean_failure(
+        &seq,
+        &["--half-decode", "--size", "800x600"],
+        &["half", "640x512"],
+    );
+    expect_clean_failure(
+        &seq,
+        &["--half-decode", "--photometric", "--mask-saturated"],
+        &["--half-decode", "--mask-saturated"],
+    );
+}
+
+/// Without libjpeg-turbo, `--half-decode` says how to build it, and writes nothing.
+#[cfg(not(feature = "turbojpeg"))]
+#[test]
+fn half_decode_without_libjpeg_turbo_says_how_to_build_it() {
+    let seq = copy_of("rectify_half_missing");
+    expect_clean_failure(&seq, &["--half-decode"], &["--features turbojpeg", "cmake"]);
+}

@@ -364,6 +364,8 @@ fn a_jpeg_too_short_for_its_size_is_corrupt() {
     for decode in [
         |b: &[u8]| dataset_io::decode_gray8(b).map(|_| ()),
         |b: &[u8]| dataset_io::decode_gray(b).map(|_| ()),
+        #[cfg(feature = "turbojpeg")]
+        |b: &[u8]| dataset_io::decode_jpeg_gray8_half(b).map(|_| ()),
     ] {
         let e = decode(&big).unwrap_err();
         assert!(
@@ -384,4 +386,85 @@ fn encoders_refuse_a_buffer_of_the_wrong_length() {
     assert!(encode_jpeg_gray(4, 4, &[0u8; 3], 90).is_err());
     assert!(encode_png_u8(4, 4, 1, &[0u8; 16], PngSpeed::Fast).is_ok());
     assert!(encode_png_u16(4, 4, &[0u16; 16], PngSpeed::Fast).is_ok());
+}
+
+/// A smooth 8-bit test image (no detail finer than 8 pixels), whose 2x2 block means a
+/// DCT-domain half-size decode reproduces closely.
+#[cfg(feature = "turbojpeg")]
+fn smooth(w: usize, h: usize) -> Vec<u8> {
+    (0..w * h)
+        .map(|p| {
+            let (x, y) = ((p % w) as f64, (p / w) as f64);
+            (128.0 + 60.0 * (x / 9.0).sin() * (y / 11.0).cos() + 0.3 * x - 0.2 * y)
+                .round()
+                .clamp(0.0, 255.0) as u8
+        })
+        .collect()
+}
+
+/// libjpeg-turbo's half-size decode, pixel by pixel, is the mean of the 2x2 block of the full
+/// decode (its DCT-domain scaling keeps the low frequencies): within 2 grey levels on a smooth
+/// image at quality 95, odd sizes rounded up. A truncated frame is an error that names the
+/// entry, as with the full decode.
+#[cfg(feature = "turbojpeg")]
+#[test]
+fn half_size_decoding_gives_the_2x2_means() {
+    const { assert!(dataset_io::HALF_DECODE) };
+    for (w, h) in [(64, 48), (65, 49), (128, 96)] {
+        let jpeg = encode_jpeg_gray(w, h, &smooth(w, h), 95).unwrap();
+        let full = dataset_io::decode_gray8(&jpeg).unwrap();
+        let half = dataset_io::decode_jpeg_gray8_half(&jpeg).unwrap();
+        assert_eq!(half.size(), (w.div_ceil(2), h.div_ceil(2)));
+        let mut worst = 0.0f64;
+        for j in 0..h / 2 {
+            for i in 0..w / 2 {
+                let f = |x: usize, y: usize| full.data()[y * w + x] as f64;
+                let mean = (f(2 * i, 2 * j)
+                    + f(2 * i + 1, 2 * j)
+                    + f(2 * i, 2 * j + 1)
+                    + f(2 * i + 1, 2 * j + 1))
+                    / 4.0;
+                worst = worst.max((half.data()[j * half.width() + i] as f64 - mean).abs());
+            }
+        }
+        assert!(worst <= 2.0, "{w}x{h}: worst {worst}");
+    }
+    let d = tmp("half");
+    make(&d, 3, "");
+    let s = Sequence::open(&d).unwrap();
+    assert_eq!(s.decode_half(1).unwrap().size(), (32, 24));
+    let entries = (0..3).map(|i| {
+        let mut b = encode_jpeg_gray(64, 48, &pattern(i, 64, 48), 95).unwrap();
+        if i == 2 {
+            b.truncate(b.len() / 2);
+        }
+        (format!("{i:05}.jpg"), b)
+    });
+    write_images_zip(&d.join("images.zip"), entries).unwrap();
+    let s = Sequence::open(&d).unwrap();
+    for e in [
+        s.decode_half(2).unwrap_err().to_string(),
+        s.decode(2).unwrap_err().to_string(),
+    ] {
+        assert!(e.contains("00002.jpg") && e.contains("corrupt JPEG"), "{e}");
+    }
+}
+
+/// Without libjpeg-turbo, asking for half-size decoding says how to build it.
+#[cfg(not(feature = "turbojpeg"))]
+#[test]
+fn half_size_decoding_without_libjpeg_turbo_says_how_to_get_it() {
+    const { assert!(!dataset_io::HALF_DECODE) };
+    let jpeg = encode_jpeg_gray(16, 16, &pattern(0, 16, 16), 90).unwrap();
+    let e = dataset_io::decode_jpeg_gray8_half(&jpeg).unwrap_err();
+    assert!(e.contains("--features turbojpeg"), "{e}");
+}
+
+/// Half-size decoding is for JPEG (DCT-domain scaling); a PNG frame is refused, not decoded
+/// at full size.
+#[test]
+fn half_size_decoding_refuses_a_png() {
+    let png = encode_png_u8(16, 16, 1, &pattern(0, 16, 16), PngSpeed::Fast).unwrap();
+    let e = dataset_io::decode_jpeg_gray8_half(&png).unwrap_err();
+    assert!(e.contains("JPEG"), "{e}");
 }

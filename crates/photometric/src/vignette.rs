@@ -58,6 +58,32 @@ impl Vignette {
         self.masked
     }
 
+    /// The map of frames decoded at half their width and height (rounded up): the mean of
+    /// each 2x2 block (of the pixels there are at an odd border), masked (0) when one of them
+    /// is, scaled to max 1 again.
+    pub fn half_size(&self) -> Result<Vignette, PhotometricError> {
+        let (w, h) = self.v.size();
+        let (hw, hh) = (w.div_ceil(2), h.div_ceil(2));
+        let src = self.v.data();
+        let mut out = Vec::with_capacity(hw * hh);
+        for j in 0..hh {
+            for i in 0..hw {
+                let (mut sum, mut n, mut masked) = (0.0f32, 0u32, false);
+                for y in (2 * j)..(2 * j + 2).min(h) {
+                    for x in (2 * i)..(2 * i + 2).min(w) {
+                        let v = src[y * w + x];
+                        masked |= v == 0.0;
+                        sum += v;
+                        n += 1;
+                    }
+                }
+                out.push(if masked { 0.0 } else { sum / n as f32 });
+            }
+        }
+        let img = Image::new(hw, hh, out).map_err(|e| PhotometricError::Vignette(e.to_string()))?;
+        Vignette::from_values(img)
+    }
+
     /// Smallest positive value.
     pub fn min_positive(&self) -> f32 {
         self.v

@@ -52,6 +52,12 @@ pub struct Args {
     /// (stored: twice the disk space, the fastest to write and to read back).
     #[arg(long, default_value_t = FrameCompression::Fast, value_name = "fast|none")]
     pub compression: FrameCompression,
+    /// Decode the JPEG frames at half their width and height in the DCT domain (libjpeg-turbo,
+    /// builds with `--features turbojpeg`) and rectify from those: about a quarter less CPU
+    /// time than the full decode with zune-jpeg. For outputs of at most half the input size;
+    /// the pixels differ from the full path's by about one grey level (RMS), a smoother image.
+    #[arg(long)]
+    pub half_decode: bool,
     /// Replace an existing OUT.
     #[arg(long)]
     pub force: bool,
@@ -70,6 +76,7 @@ Examples:
   monovo rectify sequence_01 -o seq01_bwd --reverse                  # backwards playback
   monovo rectify sequence_01 -o seq01_lin --photometric --depth 16   # undo response and vignette
   monovo rectify sequence_01 -o seq01_raw --compression none         # stored PNG: fastest, 2x disk
+  monovo rectify sequence_01 -o seq01_fast --half-decode             # JPEG decoded at half size
 
 OUT is a new sequence folder that monovo and DSO read: PNG frames in images/ (or images.zip
 with --zip), times.txt and a pinhole camera.txt. Without --photometric, pcalib.txt is copied
@@ -125,6 +132,7 @@ impl Args {
             compression: self.compression,
             force: self.force,
             bit_depth,
+            half_decode: self.half_decode,
         }
     }
 }
