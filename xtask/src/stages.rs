@@ -332,6 +332,11 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
         written.stored_fps,
         written.stored_ratio,
     );
+    if let Some((ratio, fps)) = written.half {
+        println!(
+            "  --half-decode (libjpeg-turbo's DCT-domain half-size decoding, then the remap from it): {fps:.0} fps, {ratio:.2} of decoding the full frames alone"
+        );
+    }
     let raw = Correction::new(&resp, Some(&vig), None, (1280, 1024), false)?;
     let got = raw.correct(&frame, Some(t))?;
     let rel = got
@@ -339,7 +344,7 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
         .iter()
         .map(|v| ((*v as f64 - b_true) / b_true).abs())
         .fold(0.0, f64::max);
-    Ok(vec![
+    Ok([
         Figure::lower("rectify.decode_ms_1thread", 1e3 / dec1, "ms"),
         Figure {
             key: "rectify.decode_fps_2threads".into(),
@@ -379,7 +384,15 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
             lower_is_better: false,
         },
         Figure::lower("rectify.correction_max_rel_error", rel, ""),
-    ])
+    ]
+    .into_iter()
+    .chain(written.half.map(|(ratio, _)| Figure {
+        key: "rectify.written_half_decode_over_decode_ratio".into(),
+        value: ratio,
+        unit: "",
+        lower_is_better: false,
+    }))
+    .collect())
 }
 
 /// The whole `monovo rectify` against decoding alone, on the current thread pool, in one run:
@@ -420,21 +433,25 @@ fn written_pipeline(
         )?;
         Ok(t0.elapsed().as_secs_f64())
     };
-    let rectify = |compression: FrameCompression| -> Result<f64> {
+    let rectify = |compression: FrameCompression, half_decode: bool| -> Result<f64> {
         let t0 = Instant::now();
         let job = RectifyJob {
             force: true,
             compression,
+            half_decode,
             ..RectifyJob::new(input.clone(), root.join("rectified"))
         };
         rectify_sequence(&job, &monovo_pipelines::Silent)?;
         Ok(t0.elapsed().as_secs_f64())
     };
-    let (mut decode, mut fast, mut stored) = (f64::MAX, f64::MAX, f64::MAX);
+    let (mut decode, mut fast, mut stored, mut half) = (f64::MAX, f64::MAX, f64::MAX, f64::MAX);
     for _ in 0..2 {
         decode = decode.min(decode_only()?);
-        fast = fast.min(rectify(FrameCompression::Fast)?);
-        stored = stored.min(rectify(FrameCompression::None)?);
+        fast = fast.min(rectify(FrameCompression::Fast, false)?);
+        stored = stored.min(rectify(FrameCompression::None, false)?);
+        if dataset_io::HALF_DECODE {
+            half = half.min(rectify(FrameCompression::Fast, true)?);
+        }
     }
     let _ = std::fs::remove_dir_all(&root);
     let f = frames as f64;
@@ -444,6 +461,7 @@ fn written_pipeline(
         fast_fps: f / fast,
         stored_fps: f / stored,
         decode_fps: f / decode,
+        half: dataset_io::HALF_DECODE.then(|| (decode / half, f / half)),
     })
 }
 
@@ -455,6 +473,9 @@ struct Written {
     fast_fps: f64,
     stored_fps: f64,
     decode_fps: f64,
+    /// With `--half-decode` (built with the turbojpeg feature): the ratio to decoding the full
+    /// frames alone, and the throughput.
+    half: Option<(f64, f64)>,
 }
 
 /// In-memory frames of a synthetic plane sequence with their true poses.

@@ -1,5 +1,6 @@
 //! Criterion benchmarks: decoding a 1280x1024 JPEG (quality 90) of a synthetic benchmark
-//! frame, the physical limit of playback, and encoding a 640x480 PNG.
+//! frame, the physical limit of playback (zune-jpeg; libjpeg-turbo with `--features
+//! turbojpeg`, which adds its half-size decode), and encoding a 640x480 PNG.
 #![allow(missing_docs, clippy::unwrap_used)]
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -24,6 +25,11 @@ fn bench(c: &mut Criterion) {
     g.bench_function("decode_jpeg_1280x1024_q90", |b| {
         b.iter(|| decode_gray8(black_box(&jpeg)).unwrap())
     });
+    if dataset_io::HALF_DECODE {
+        g.bench_function("decode_jpeg_1280x1024_q90_half_size", |b| {
+            b.iter(|| dataset_io::decode_jpeg_gray8_half(black_box(&jpeg)).unwrap())
+        });
+    }
     let small: Vec<u8> = frame
         .chunks(1280)
         .step_by(2)

@@ -173,7 +173,7 @@ pub fn decode_jpeg_gray8_half(bytes: &[u8]) -> Result<Image<u8>, String> {
     return crate::turbo::decode_gray8(bytes, 2);
     #[cfg(not(feature = "turbojpeg"))]
     Err(
-        "half-size decoding needs libjpeg-turbo: build monovo with `--features turbojpeg` (cmake and nasm)"
+        "half-size decoding needs libjpeg-turbo: build with `--features turbojpeg` (cmake and nasm)"
             .into(),
     )
 }

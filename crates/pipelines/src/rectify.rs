@@ -326,7 +326,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
     if half {
         if !dataset_io::HALF_DECODE {
             return Err(PipelineError::Invalid(
-                "--half-decode needs libjpeg-turbo: this monovo was built without it (build with `cargo build --release --features turbojpeg`, which needs cmake and nasm)".into(),
+                "--half-decode needs libjpeg-turbo: this monovo was built without it (build it with `cargo build --release -p monovo --features turbojpeg`, which needs cmake and nasm)".into(),
             ));
         }
         if deep {

@@ -53,9 +53,10 @@ pub struct Args {
     #[arg(long, default_value_t = FrameCompression::Fast, value_name = "fast|none")]
     pub compression: FrameCompression,
     /// Decode the JPEG frames at half their width and height in the DCT domain (libjpeg-turbo,
-    /// builds with `--features turbojpeg`) and rectify from those: about a quarter less CPU
-    /// time than the full decode with zune-jpeg. For outputs of at most half the input size;
-    /// the pixels differ from the full path's by about one grey level (RMS), a smoother image.
+    /// in builds with `--features turbojpeg`) and rectify from those: a quarter less decoding
+    /// time than zune-jpeg's full decode. For outputs of at most half the input size; the
+    /// pixels differ from the full path's by about one grey level on average (no bias; a 2x2
+    /// mean instead of a point sample, so hot pixels and fine texture are softer).
     #[arg(long)]
     pub half_decode: bool,
     /// Replace an existing OUT.
