@@ -4,13 +4,16 @@
 //!
 //! Strict as the zune-jpeg path: libjpeg-turbo's warnings (a premature end of the data, a
 //! corrupt Huffman code) stop the decoding with an error instead of a grey or smeared frame.
-//! One decompressor per thread, made on first use and reused.
+//! One decompressor per thread, made on first use and reused until a frame fails to decode.
 
 use std::cell::RefCell;
 use std::ffi::CStr;
 
 use camera_model::Image;
 use turbojpeg_sys as tj;
+
+/// The largest width or height decoded (zune-jpeg's default limit).
+const MAX_SIDE: usize = 16384;
 
 /// A TurboJPEG decompressor handle.
 struct Decompressor(tj::tjhandle);
@@ -68,6 +71,12 @@ impl Decompressor {
             if w == 0 || h == 0 {
                 return Err("corrupt JPEG: no frame size".into());
             }
+            // zune-jpeg's limit, so that both builds accept the same frames
+            if w > MAX_SIDE || h > MAX_SIDE {
+                return Err(format!(
+                    "corrupt JPEG: {w}x{h} is larger than {MAX_SIDE}x{MAX_SIDE}"
+                ));
+            }
             crate::sequence::check_jpeg_data_size(w, h, jpeg.len())?;
             let factor = tj::tjscalingfactor {
                 num: 1,
@@ -107,9 +116,15 @@ pub(crate) fn decode_gray8(jpeg: &[u8], denom: usize) -> Result<Image<u8>, Strin
         if slot.is_none() {
             *slot = Some(Decompressor::new()?);
         }
-        match slot.as_mut() {
+        let result = match slot.as_mut() {
             Some(d) => d.decode(jpeg, denom),
             None => Err("libjpeg-turbo: no decompressor".into()),
+        };
+        // after a failure a TurboJPEG handle keeps failing (the next good frame reports the
+        // last error): a new one for the next frame
+        if result.is_err() {
+            *slot = None;
         }
+        result
     })
 }

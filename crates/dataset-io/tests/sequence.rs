@@ -468,3 +468,42 @@ fn half_size_decoding_refuses_a_png() {
     let e = dataset_io::decode_jpeg_gray8_half(&png).unwrap_err();
     assert!(e.contains("JPEG"), "{e}");
 }
+
+/// A frame wider than 16384 pixels is refused before any allocation by both decoders
+/// (zune-jpeg's limit, kept by the libjpeg-turbo build), with the size in the error.
+#[test]
+fn a_jpeg_wider_than_16384_is_refused() {
+    let good = encode_jpeg_gray(16, 16, &pattern(0, 16, 16), 90).unwrap();
+    let sof = good.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+    let mut wide = good.clone();
+    // height 8, width 16400: 2050 blocks, which the file's bits could hold
+    wide[sof + 5..sof + 9].copy_from_slice(&[0x00, 0x08, 0x40, 0x10]);
+    assert!(good.len() * 8 >= 2050, "{}", good.len());
+    let e = dataset_io::decode_gray8(&wide).unwrap_err();
+    assert!(e.contains("16384") && e.contains("16400"), "{e}");
+}
+
+/// A corrupt frame leaves nothing behind in the decoder: the good frames before and after it
+/// decode the same (libjpeg-turbo's handle, reused per thread, would otherwise keep failing
+/// with the corrupt frame's error), here on one thread, in every order.
+#[test]
+fn a_corrupt_jpeg_does_not_spoil_the_next_frame() {
+    let good = encode_jpeg_gray(16, 16, &pattern(0, 16, 16), 90).unwrap();
+    let want = dataset_io::decode_gray8(&good).unwrap();
+    let mut flipped = good.clone();
+    let n = flipped.len();
+    flipped[n - 20] ^= 0x10;
+    let truncated = &good[..good.len() / 2];
+    for bad in [&[0xFF, 0xD8, 1, 2, 3][..], truncated, &flipped, &good[..2]] {
+        let _ = dataset_io::decode_gray8(bad);
+        assert_eq!(dataset_io::decode_gray8(&good).unwrap(), want);
+        let _ = dataset_io::decode_jpeg_gray8_half(bad);
+        assert_eq!(dataset_io::decode_gray8(&good).unwrap(), want);
+        if dataset_io::HALF_DECODE {
+            assert_eq!(
+                dataset_io::decode_jpeg_gray8_half(&good).unwrap().size(),
+                (8, 8)
+            );
+        }
+    }
+}
