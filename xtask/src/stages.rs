@@ -255,7 +255,10 @@ fn fps_with_threads(threads: usize, frames: usize, f: impl Fn(usize) + Sync) -> 
 fn rectify(quick: bool) -> Result<Vec<Figure>> {
     use photometric::{Correction, InverseResponse, Vignette};
     use synthetic::scene::{SequenceConfig, SyntheticSequence};
-    println!("stage rectify: 1280x1024 JPEG q90 -> 640x480 pinhole");
+    println!(
+        "stage rectify: 1280x1024 JPEG q90 -> 640x480 pinhole (JPEG decoder: {})",
+        dataset_io::JPEG_DECODER
+    );
     let n_unique = if quick { 8 } else { 24 };
     let seq = SyntheticSequence::new(
         2,

@@ -64,6 +64,8 @@ fn rectified_frames_equal_rectifying_each_decoded_frame_by_hand() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert_eq!(v["frames"], 8);
+    assert_eq!(v["half_decode"], false);
+    assert_eq!(v["jpeg_decoder"], dataset_io::JPEG_DECODER);
     let raw = Sequence::open(fixture()).unwrap();
     let cam = raw.camera().unwrap();
     let map =
@@ -539,6 +541,7 @@ fn half_decode_rectifies_the_half_size_frames() {
             if out == &half {
                 let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
                 assert_eq!(v["half_decode"], true);
+                assert_eq!(v["jpeg_decoder"], "libjpeg-turbo");
             }
         }
         let (h, f) = (

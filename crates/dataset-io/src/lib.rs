@@ -50,7 +50,7 @@ pub use png::{
 pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};
 pub use sequence::{
     decode_gray, decode_gray16, decode_gray8, decode_gray_map, decode_jpeg_gray8_half, read_gray16,
-    read_gray8, read_gray_map, Frame, GrayImage, NativeFrame, Sequence, HALF_DECODE,
+    read_gray8, read_gray_map, Frame, GrayImage, NativeFrame, Sequence, HALF_DECODE, JPEG_DECODER,
 };
 pub use temporaries::{
     in_flight as temporaries_in_flight, remove_all_and_block as remove_temporaries_and_block,

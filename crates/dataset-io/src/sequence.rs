@@ -155,6 +155,14 @@ fn decode_jpeg_gray8_zune(bytes: &[u8]) -> Result<Image<u8>, String> {
     Image::new(w, h, data).map_err(|e| e.to_string())
 }
 
+/// The library that decodes JPEG frames in this build: `zune-jpeg`, or `libjpeg-turbo` with
+/// the `turbojpeg` feature.
+pub const JPEG_DECODER: &str = if cfg!(feature = "turbojpeg") {
+    "libjpeg-turbo"
+} else {
+    "zune-jpeg"
+};
+
 /// Whether this build decodes JPEG frames at half size in the DCT domain
 /// ([`decode_jpeg_gray8_half`]): built with the `turbojpeg` feature.
 pub const HALF_DECODE: bool = cfg!(feature = "turbojpeg");

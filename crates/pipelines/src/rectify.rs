@@ -218,6 +218,8 @@ pub struct Rectified {
     pub pixel_value: Option<String>,
     /// Whether the frames were decoded at half size (`--half-decode`).
     pub half_decode: bool,
+    /// The library that decodes JPEG frames in this build (`zune-jpeg` or `libjpeg-turbo`).
+    pub jpeg_decoder: &'static str,
 }
 
 /// Number of frames sampled for the 8-bit irradiance scale.
@@ -700,6 +702,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         scale_source,
         pixel_value,
         half_decode: half,
+        jpeg_decoder: dataset_io::JPEG_DECODER,
     })
 }
 

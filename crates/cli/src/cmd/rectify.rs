@@ -161,6 +161,12 @@ pub fn run_command(cmd: &Command) -> Result<()> {
     if let (Some(f), Some(src)) = (&r.pixel_value, &r.scale_source) {
         outln!("{f} ({src})")?;
     }
+    if r.half_decode {
+        outln!(
+            "frames decoded at half size in the DCT domain ({})",
+            r.jpeg_decoder
+        )?;
+    }
     if r.invalid_pixels > 0 {
         outln!(
             "{} output pixels have no source and are 0",
