@@ -104,7 +104,8 @@ pub struct Sequence {
 }
 
 /// Every 8x8 block of a Huffman-coded scan takes at least one bit (the code of its DC
-/// difference), and neither decoder has arithmetic decoding. A frame that declares more
+/// difference); zune-jpeg has no arithmetic decoding, and the libjpeg-turbo build skips this
+/// check for arithmetic-coded frames, which can spend less. A frame that declares more
 /// blocks than the file has bits ended its scan early (an end-of-image marker where data
 /// should be), which zune-jpeg accepts even in strict mode and would fill, for a few hundred
 /// bytes, as a mostly empty image of up to 16384x16384 pixels; checked before any allocation.

@@ -77,7 +77,11 @@ impl Decompressor {
                     "corrupt JPEG: {w}x{h} is larger than {MAX_SIDE}x{MAX_SIDE}"
                 ));
             }
-            crate::sequence::check_jpeg_data_size(w, h, jpeg.len())?;
+            // arithmetic coding (which libjpeg-turbo decodes) can spend less than a bit on a
+            // block: the check of the data size is for Huffman-coded frames
+            if tj::tj3Get(self.0, tj::TJPARAM_TJPARAM_ARITHMETIC as _) == 0 {
+                crate::sequence::check_jpeg_data_size(w, h, jpeg.len())?;
+            }
             let factor = tj::tjscalingfactor {
                 num: 1,
                 denom: denom as _,
@@ -127,4 +131,73 @@ pub(crate) fn decode_gray8(jpeg: &[u8], denom: usize) -> Result<Image<u8>, Strin
         }
         result
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// An 8-bit grey JPEG from libjpeg-turbo's own compressor, arithmetic- or Huffman-coded.
+    #[allow(unsafe_code)]
+    fn compress(w: usize, h: usize, pixels: &[u8], arithmetic: bool) -> Vec<u8> {
+        assert_eq!(pixels.len(), w * h);
+        // SAFETY: a compressor handle used and destroyed here; the source slice holds w x h
+        // grey pixels at pitch w; the output buffer is allocated by libjpeg-turbo, copied,
+        // and freed with tj3Free.
+        unsafe {
+            let c = tj::tj3Init(tj::TJINIT_TJINIT_COMPRESS as _);
+            assert!(!c.is_null());
+            assert_eq!(tj::tj3Set(c, tj::TJPARAM_TJPARAM_QUALITY as _, 90), 0);
+            assert_eq!(
+                tj::tj3Set(
+                    c,
+                    tj::TJPARAM_TJPARAM_SUBSAMP as _,
+                    tj::TJSAMP_TJSAMP_GRAY as _
+                ),
+                0
+            );
+            assert_eq!(
+                tj::tj3Set(c, tj::TJPARAM_TJPARAM_ARITHMETIC as _, arithmetic as _),
+                0
+            );
+            let mut buf: *mut u8 = std::ptr::null_mut();
+            let mut size = 0 as _;
+            let r = tj::tj3Compress8(
+                c,
+                pixels.as_ptr(),
+                w as _,
+                w as _,
+                h as _,
+                tj::TJPF_TJPF_GRAY as _,
+                &mut buf,
+                &mut size,
+            );
+            assert_eq!(r, 0);
+            let out = std::slice::from_raw_parts(buf, size as usize).to_vec();
+            tj::tj3Free(buf as _);
+            tj::tj3Destroy(c);
+            out
+        }
+    }
+
+    /// A flat arithmetic-coded frame takes less than a bit per 8x8 block, which the data-size
+    /// check (made for Huffman coding, where each block takes at least one) would refuse:
+    /// it decodes; the same frame Huffman-coded is above the bound and decodes too.
+    #[test]
+    fn a_flat_arithmetic_coded_frame_is_not_refused_as_too_short() {
+        let (w, h) = (1024, 1024);
+        let flat = vec![117u8; w * h];
+        let arith = compress(w, h, &flat, true);
+        assert!(
+            arith.len() * 8 < (w / 8) * (h / 8),
+            "{} bytes: not below a bit per block, the test proves nothing",
+            arith.len()
+        );
+        let img = decode_gray8(&arith, 1).unwrap();
+        assert_eq!(img.size(), (w, h));
+        assert!(img.data().iter().all(|v| *v == 117));
+        let huff = compress(w, h, &flat, false);
+        assert_eq!(decode_gray8(&huff, 2).unwrap().size(), (w / 2, h / 2));
+    }
 }
