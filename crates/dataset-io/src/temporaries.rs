@@ -29,7 +29,8 @@ pub(crate) fn creating() -> RwLockReadGuard<'static, ()> {
 }
 
 /// The hidden name of a temporary for `target`: same folder, `.NAME.tmp-PID-N`, unique to
-/// this process and call. Not yet registered (see [`register`]).
+/// this process and call. Not yet registered for removal on an interrupt: the writers of this
+/// crate register theirs when they create them.
 pub fn temp_sibling(target: &Path) -> PathBuf {
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let name = target
