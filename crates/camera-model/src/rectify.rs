@@ -242,6 +242,24 @@ fn snap_inside(src: [f64; 2], size: ImageSize) -> Option<[f64; 2]> {
     ok.then(|| [src[0].clamp(0.0, w), src[1].clamp(0.0, h)])
 }
 
+/// Where output pixel `(u, v)` of the pinhole `out_camera` looks in `input`'s raw image
+/// (anywhere, not checked against its size). A pinhole input is mapped in closed form
+/// (`x_in = a x_out + b` per axis), so that the identity is exact.
+fn source_in(
+    input: &CameraModel,
+    out_camera: Intrinsics,
+) -> impl Fn(usize, usize) -> Option<[f64; 2]> + Sync + '_ {
+    let linear = input.is_pinhole().then(|| {
+        let k = input.intrinsics();
+        let (ax, ay) = (k.fx / out_camera.fx, k.fy / out_camera.fy);
+        (ax, k.cx - ax * out_camera.cx, ay, k.cy - ay * out_camera.cy)
+    });
+    move |u, v| match linear {
+        Some((ax, bx, ay, by)) => Some([ax * u as f64 + bx, ay * v as f64 + by]),
+        None => input.project_normalized(out_camera.pixel_to_normalized([u as f64, v as f64])),
+    }
+}
+
 /// The raw pixel of a normalised output direction, when it lies in the input image before
 /// any fold of the distortion (beyond a fold the image repeats mirrored).
 #[inline]
@@ -462,19 +480,7 @@ impl RectifyMap {
         out_camera: Intrinsics,
         out_size: ImageSize,
     ) -> Result<RectifyMap, CameraError> {
-        if input.is_pinhole() {
-            let k = input.intrinsics();
-            let ax = k.fx / out_camera.fx;
-            let ay = k.fy / out_camera.fy;
-            let bx = k.cx - ax * out_camera.cx;
-            let by = k.cy - ay * out_camera.cy;
-            return RectifyMap::build(in_size, out_size, out_camera, |u, v| {
-                Some([ax * u as f64 + bx, ay * v as f64 + by])
-            });
-        }
-        RectifyMap::build(in_size, out_size, out_camera, |u, v| {
-            input.project_normalized(out_camera.pixel_to_normalized([u as f64, v as f64]))
-        })
+        RectifyMap::build(in_size, out_size, out_camera, source_in(input, out_camera))
     }
 
     /// The map of output `none`: the raw image passes through unchanged at the input size;
@@ -607,19 +613,9 @@ impl RectifyMap {
                 (0.5 * s[1] - 0.25).clamp(0.0, hh),
             ]
         };
-        if input.is_pinhole() {
-            let ki = input.intrinsics();
-            let ax = ki.fx / k.fx;
-            let ay = ki.fy / k.fy;
-            let bx = ki.cx - ax * k.cx;
-            let by = ki.cy - ay * k.cy;
-            return RectifyMap::build(half, out_size, k, |u, v| {
-                snap_inside([ax * u as f64 + bx, ay * v as f64 + by], in_size).map(to_half)
-            });
-        }
+        let source = source_in(input, k);
         RectifyMap::build(half, out_size, k, |u, v| {
-            input
-                .project_normalized(k.pixel_to_normalized([u as f64, v as f64]))
+            source(u, v)
                 .and_then(|s| snap_inside(s, in_size))
                 .map(to_half)
         })

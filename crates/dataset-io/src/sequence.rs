@@ -605,15 +605,19 @@ impl Sequence {
 
     /// Frame `k` at half size (see [`Sequence::decode_half`]).
     pub fn frame_half(&self, k: usize) -> Result<NativeFrame, DatasetError> {
-        let image = GrayImage::U8(self.decode_half(k)?);
+        Ok(self.native_frame(k, GrayImage::U8(self.decode_half(k)?)))
+    }
+
+    /// Frame `k` with its decoded `image`, name, timestamp and exposure.
+    fn native_frame(&self, k: usize, image: GrayImage) -> NativeFrame {
         let row = &self.times.rows[k];
-        Ok(NativeFrame {
+        NativeFrame {
             index: k,
             name: self.names[k].clone(),
             image,
             timestamp: row.timestamp,
             exposure_ms: row.exposure_ms,
-        })
+        }
     }
 
     /// As [`Sequence::process_native`], with the frames decoded at half size
@@ -649,15 +653,7 @@ impl Sequence {
 
     /// Frame `k` at its own bit depth.
     pub fn frame_native(&self, k: usize) -> Result<NativeFrame, DatasetError> {
-        let image = self.decode_native(k)?;
-        let row = &self.times.rows[k];
-        Ok(NativeFrame {
-            index: k,
-            name: self.names[k].clone(),
-            image,
-            timestamp: row.timestamp,
-            exposure_ms: row.exposure_ms,
-        })
+        Ok(self.native_frame(k, self.decode_native(k)?))
     }
 
     /// [`Sequence::process`] with frames at their own bit depth (8 or 16 bits).
@@ -674,12 +670,7 @@ impl Sequence {
         W: Fn(NativeFrame) -> Result<T, E> + Sync,
         S: FnMut(T) -> Result<(), E>,
     {
-        for_each_ordered(
-            indices.len(),
-            chunk,
-            |i| work(self.frame_native(indices[i])?),
-            sink,
-        )
+        self.process_scaled(indices, chunk, false, work, sink)
     }
 
     /// Frame `k`: decoded image, timestamp and exposure.
