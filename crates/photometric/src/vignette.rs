@@ -17,21 +17,23 @@ impl Vignette {
     /// Normalises a map of any scale by its maximum. Fails when no value is positive or a
     /// value is not finite or negative.
     pub fn from_values(values: Image<f32>) -> Result<Vignette, PhotometricError> {
-        let mut max = 0.0f32;
-        for &v in values.data() {
-            if !v.is_finite() || v < 0.0 {
+        let (max, valid, masked) = scan(values.data());
+        if !valid {
+            if let Some(v) = values
+                .data()
+                .iter()
+                .find(|v| !(v.is_finite() && **v >= 0.0))
+            {
                 return Err(PhotometricError::Vignette(format!(
                     "value {v} is not finite and non-negative"
                 )));
             }
-            max = max.max(v);
         }
         if max <= 0.0 {
             return Err(PhotometricError::Vignette(
                 "every pixel is 0 (an empty or failed calibration)".into(),
             ));
         }
-        let masked = values.data().iter().filter(|v| **v == 0.0).count();
         Ok(Vignette {
             v: values.map(|x| x / max),
             masked,
@@ -86,9 +88,17 @@ impl Vignette {
 
     /// Smallest positive value.
     pub fn min_positive(&self) -> f32 {
-        self.v
-            .data()
-            .iter()
+        // in lanes, which the compiler vectorises (a fold of `f32::min` is scalar)
+        let mut lanes = [1.0f32; LANES];
+        let chunks = self.v.data().chunks_exact(LANES);
+        let rest = chunks.remainder();
+        for c in chunks {
+            for (m, &v) in lanes.iter_mut().zip(c) {
+                *m = if v > 0.0 && v < *m { v } else { *m };
+            }
+        }
+        rest.iter()
+            .chain(&lanes)
             .copied()
             .filter(|v| *v > 0.0)
             .fold(1.0, f32::min)
@@ -131,4 +141,38 @@ pub fn vignette_errors(estimate: &[f32], truth: &[f32]) -> (f64, f64) {
         (s / n.max(1) as f64).sqrt(),
         n as f64 / truth.len().max(1) as f64,
     )
+}
+
+/// Values per lane group of the scans below (a 256-bit vector of `f32`).
+const LANES: usize = 8;
+
+/// One pass over a map: its largest value, whether every value is finite and non-negative,
+/// and how many are 0, kept per lane so that the compiler vectorises the loop (a 1280x1024
+/// map in a fraction of a millisecond, a few milliseconds before the first frame otherwise).
+fn scan(data: &[f32]) -> (f32, bool, usize) {
+    let mut max = [0f32; LANES];
+    let mut valid = [true; LANES];
+    let mut zeros = [0usize; LANES];
+    let chunks = data.chunks_exact(LANES);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for i in 0..LANES {
+            let v = c[i];
+            max[i] = if v > max[i] { v } else { max[i] };
+            // false for NaN, infinities and negative values
+            valid[i] &= (0.0..=f32::MAX).contains(&v);
+            zeros[i] += (v == 0.0) as usize;
+        }
+    }
+    let mut out = (
+        max.iter().copied().fold(0.0, f32::max),
+        valid.iter().all(|v| *v),
+        zeros.iter().sum(),
+    );
+    for &v in rest {
+        out.0 = out.0.max(v);
+        out.1 &= (0.0..=f32::MAX).contains(&v);
+        out.2 += (v == 0.0) as usize;
+    }
+    out
 }

@@ -161,6 +161,49 @@ fn vignette_is_normalised_and_zero_pixels_are_masked() {
     assert!(v.check_size(8, 6).is_ok() && v.check_size(6, 8).is_err());
 }
 
+proptest::proptest! {
+    /// The vectorised scans of `from_values` and `min_positive` against their plain
+    /// definitions, over lengths that leave every remainder of the lanes, with zeros and any
+    /// one bad value (NaN, an infinity, a negative) anywhere, the remainder included.
+    #[test]
+    fn vignette_scans_match_their_definitions(
+        vals in proptest::collection::vec(proptest::prop_oneof![
+            3 => 0.0f32..1000.0,
+            1 => proptest::strategy::Just(0.0f32),
+        ], 1..70),
+        bad in proptest::option::of((0usize..70, proptest::prop_oneof![
+            proptest::strategy::Just(f32::NAN),
+            proptest::strategy::Just(f32::INFINITY),
+            proptest::strategy::Just(f32::NEG_INFINITY),
+            -5.0f32..-1e-6,
+        ])),
+    ) {
+        let mut vals = vals;
+        if let Some((at, v)) = bad {
+            let at = at % vals.len();
+            vals[at] = v;
+        }
+        let n = vals.len();
+        let got = Vignette::from_values(Image::new(n, 1, vals.clone()).unwrap());
+        let valid = vals.iter().all(|v| v.is_finite() && *v >= 0.0);
+        let max = vals.iter().copied().fold(0.0f32, f32::max);
+        if !valid {
+            let first = vals.iter().find(|v| !(v.is_finite() && **v >= 0.0)).unwrap();
+            let e = got.unwrap_err().to_string();
+            proptest::prop_assert!(e.contains(&format!("value {first} ")), "{e}");
+        } else if max <= 0.0 {
+            proptest::prop_assert!(got.is_err());
+        } else {
+            let v = got.unwrap();
+            let want: Vec<f32> = vals.iter().map(|x| x / max).collect();
+            proptest::prop_assert_eq!(v.values().data(), &want[..]);
+            proptest::prop_assert_eq!(v.masked(), vals.iter().filter(|x| **x == 0.0).count());
+            let min = want.iter().copied().filter(|x| *x > 0.0).fold(1.0, f32::min);
+            proptest::prop_assert_eq!(v.min_positive(), min);
+        }
+    }
+}
+
 #[test]
 fn response_errors_are_scale_aware() {
     let truth = ground_truth_response();

@@ -170,6 +170,7 @@ pub fn parse_range(s: &str, len: usize) -> Result<std::ops::Range<usize>> {
 }
 
 enum Pixels {
+    /// The frames remapped alone, by the job's map.
     Geometric(RectifyMap),
     /// The general float path (needed for saturation masking).
     Photometric(Box<Correction>, f32),
@@ -265,6 +266,64 @@ fn irradiance_scale(
     Ok((q.is_finite() && q > 0.0).then_some((max / q, picks.len())))
 }
 
+/// The vignette of the rectified frames: `v` remapped, as a 16-bit PNG with V = 1 at 65535
+/// (65535 where the map has no source, whose frame pixels are 0, and never below 1 elsewhere,
+/// so that nothing is divided by 0). Written with fdeflate: a 640x480 map takes 0.46 MB
+/// instead of zlib's 0.19 MB, in a fifth of the time.
+fn rectified_vignette(
+    map: &RectifyMap,
+    v: &photometric::Vignette,
+    out_size: ImageSize,
+) -> Result<Vec<u8>> {
+    let rv = map.remap_f32(v.values())?;
+    let v16: Vec<u16> = rv
+        .data()
+        .iter()
+        .map(|x| {
+            if x.is_nan() {
+                65535
+            } else {
+                (x * 65535.0).round().clamp(1.0, 65535.0) as u16
+            }
+        })
+        .collect();
+    dataset_io::encode_png_u16(out_size.width, out_size.height, &v16, PngSpeed::Fast)
+        .map_err(encode_error)
+}
+
+/// The inverse response of `pcalib.txt` (with the parser's notes and the file's path) and
+/// the vignette of `vignette.png`, each when the sequence has it; for frames decoded at
+/// half size, the vignette averaged over the same 2x2 blocks.
+#[allow(clippy::type_complexity)]
+fn read_calibration(
+    seq: &Sequence,
+    half: bool,
+) -> Result<(
+    Option<(InverseResponse, Vec<String>, PathBuf)>,
+    Option<photometric::Vignette>,
+)> {
+    let response = match &seq.pcalib_path {
+        Some(p) => {
+            let (u, notes) = InverseResponse::parse_with_notes(&dataset_io::read_text(p)?)
+                .with_context(|| p.display().to_string())?;
+            Some((u, notes, p.clone()))
+        }
+        None => None,
+    };
+    let vignette = match &seq.vignette_path {
+        Some(p) => {
+            let v = crate::read_vignette(p, seq.image_size())?;
+            Some(if half {
+                v.half_size().with_context(|| p.display().to_string())?
+            } else {
+                v
+            })
+        }
+        None => None,
+    };
+    Ok((response, vignette))
+}
+
 /// Rectifies (and photometrically corrects) a sequence into a new sequence folder, as
 /// `monovo rectify` does: frames decoded in parallel and written in order, the output folder
 /// complete or absent. Warnings and progress go to `observer`.
@@ -343,12 +402,19 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             ));
         }
     }
-    let map = if half {
-        RectifyMap::for_mode_half_input(&cam.input, cam.input_size, &mode, out_size)
-    } else {
-        RectifyMap::for_mode(&cam.input, cam.input_size, &mode, out_size)
-    }
-    .with_context(|| {
+    // the map (its rows in parallel) and the photometric files (a serial PNG decode, about
+    // as long as the map on two cores) at once: both come before the first frame
+    let (map, calibration) = rayon::join(
+        || {
+            if half {
+                RectifyMap::for_mode_half_input(&cam.input, cam.input_size, &mode, out_size)
+            } else {
+                RectifyMap::for_mode(&cam.input, cam.input_size, &mode, out_size)
+            }
+        },
+        || read_calibration(&seq, half),
+    );
+    let map = map.with_context(|| {
         format!(
             "{}: output camera `{mode}` at {out_size}",
             camera_path.display()
@@ -362,6 +428,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         ));
     }
     let k = map.camera();
+    let invalid_pixels = map.invalid_count();
     let range = match &args.range {
         Some(r) => parse_range(r, seq.len())?,
         None => 0..seq.len(),
@@ -388,17 +455,13 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             ));
         }
     }
-    let response = match &seq.pcalib_path {
-        Some(p) => {
-            let (u, notes) = InverseResponse::parse_with_notes(&dataset_io::read_text(p)?)
-                .with_context(|| p.display().to_string())?;
-            for n in notes {
-                observer.warn(&format!("{}: {n}", p.display()));
-            }
-            Some(u)
+    let (response, vignette) = calibration?;
+    let response = response.map(|(u, notes, p)| {
+        for n in notes {
+            observer.warn(&format!("{}: {n}", p.display()));
         }
-        None => None,
-    };
+        u
+    });
     // 16-bit frames with a 2^k-value table (k < 16) and no --bit-depth: the values are k-bit
     // values in the low bits, as DSO and DM-VIO index the table (`G[pixel]`)
     if let (None, true, true, Some(r)) = (bit_depth, deep, photometric, &response) {
@@ -406,21 +469,6 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             bits = r.bits();
         }
     }
-    let vignette = match &seq.vignette_path {
-        Some(p) => {
-            let v = crate::read_vignette(p, seq.image_size())?;
-            // frames decoded at half size: the vignette averaged over the same 2x2 blocks
-            Some(if half {
-                v.half_size().map_err(|source| PipelineError::Photometric {
-                    context: p.display().to_string(),
-                    source,
-                })?
-            } else {
-                v
-            })
-        }
-        None => None,
-    };
     let max16 = if args.depth == 16 { 65535.0 } else { 255.0 };
     let mut scale_source = None;
     let pixels = if photometric {
@@ -437,18 +485,25 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             ));
         }
         let in_size = (map.input_size().width, map.input_size().height);
-        let corr = Correction::new(
-            resp,
-            vignette.as_ref(),
-            Some(map.clone()),
-            in_size,
-            args.mask_saturated,
-        )?;
-        let corr = if deep {
-            corr.with_bit_depth(resp, bits, args.mask_saturated)?
-        } else {
-            corr
+        // the float correction, made only where it is needed (16-bit frames,
+        // --mask-saturated, the data's irradiance scale): the 8-bit frames of the others go
+        // through the quantised one alone, and each costs a copy of the map and a remap of
+        // the vignette before the first frame
+        let float_correction = || -> Result<Correction> {
+            let corr = Correction::new(
+                resp,
+                vignette.as_ref(),
+                Some(map.clone()),
+                in_size,
+                args.mask_saturated,
+            )?;
+            Ok(if deep {
+                corr.with_bit_depth(resp, bits, args.mask_saturated)?
+            } else {
+                corr
+            })
         };
+        let mut corr = None;
         // largest value: U(white) / (min V [* t_min]): nothing clips
         let t_min = if args.irradiance {
             seq.times().exposure_range().map_or(1.0, |r| r.0)
@@ -463,6 +518,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
                 s
             }
             None if args.irradiance && args.depth == 8 => {
+                let corr = corr.insert(float_correction()?);
                 let (w, h) = (out_size.width, out_size.height);
                 let sample = |f: &dataset_io::NativeFrame| -> Result<Image<f32>> {
                     let mut out = Image::filled(w, h, 0f32);
@@ -491,16 +547,22 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
                 max16 / max_value
             }
         };
-        if deep {
-            Pixels::Deep(Box::new(corr), scale)
-        } else if args.mask_saturated {
-            Pixels::Photometric(Box::new(corr), scale)
+        if deep || args.mask_saturated {
+            let corr = match corr {
+                Some(c) => c,
+                None => float_correction()?,
+            };
+            if deep {
+                Pixels::Deep(Box::new(corr), scale)
+            } else {
+                Pixels::Photometric(Box::new(corr), scale)
+            }
         } else {
             Pixels::Fast(
                 Box::new(QuantizedCorrection::with_vignette(
                     resp,
                     vignette.as_ref(),
-                    map.clone(),
+                    map,
                     scale,
                     args.depth,
                 )?),
@@ -508,7 +570,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             )
         }
     } else {
-        Pixels::Geometric(map.clone())
+        Pixels::Geometric(map)
     };
     let scale = match &pixels {
         Pixels::Photometric(_, s) | Pixels::Fast(_, s) | Pixels::Deep(_, s) => Some(*s),
@@ -545,31 +607,6 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         if let (Some(p), Some(_)) = (&seq.pcalib_path, &response) {
             writer.add_file("pcalib.txt", dataset_io::read_text(p)?.as_bytes())?;
         }
-        if let Some(v) = &vignette {
-            let rv = map.remap_f32(v.values())?;
-            let v16: Vec<u16> = rv
-                .data()
-                .iter()
-                .map(|x| {
-                    if x.is_nan() {
-                        65535
-                    } else {
-                        (x * 65535.0).round().clamp(1.0, 65535.0) as u16
-                    }
-                })
-                .collect();
-            let bytes = dataset_io::encode_png_u16(
-                out_size.width,
-                out_size.height,
-                &v16,
-                // written before the first frame, so its time adds to the wall time: with
-                // fdeflate instead of zlib's level 6 a one-frame run of a 1280x1024 sequence
-                // takes 50 ms instead of 60, for a 640x480 map of 0.46 MB instead of 0.19 MB
-                PngSpeed::Fast,
-            )
-            .map_err(encode_error)?;
-            writer.add_file("vignette.png", &bytes)?;
-        }
     }
     // the ground truth is indexed by timestamp: still valid unless the timestamps are mapped
     if let (Some(p), false) = (&seq.ground_truth_path, args.reverse) {
@@ -584,105 +621,113 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
     let reverse = args.reverse;
     let sample_max = (1u32 << bits) - 1;
     let speed = args.compression.png();
-    let written = seq.process_scaled(
-        &indices,
-        threads * 4,
-        half,
-        |frame| -> Result<(f64, Option<f64>, Vec<u8>)> {
-            let (w, h) = (out_size.width, out_size.height);
-            let label = || format!("frame {} ({})", frame.index, frame.name);
-            if let GrayImage::U16(img) = &frame.image {
-                if let Some(v) = img.data().iter().find(|v| **v as u32 > sample_max) {
-                    return Err(PipelineError::Invalid(format!(
+    // the rectified vignette (geometric output only) is made by one of the pool's threads
+    // while the other decodes the first frames, off the path to the first frame
+    let mut vignette_png = None;
+    let work = |frame: dataset_io::NativeFrame| -> Result<(f64, Option<f64>, Vec<u8>)> {
+        let (w, h) = (out_size.width, out_size.height);
+        let label = || format!("frame {} ({})", frame.index, frame.name);
+        if let GrayImage::U16(img) = &frame.image {
+            if let Some(v) = img.data().iter().find(|v| **v as u32 > sample_max) {
+                return Err(PipelineError::Invalid(format!(
                         "{}: pixel value {v} does not fit in --bit-depth {bits} (at most {sample_max}); are the values in the high bits? then the bit depth is 16",
                         label()
                     )));
+            }
+        }
+        let png = match (&pixels, &frame.image) {
+            (Pixels::Geometric(map), GrayImage::U8(img)) => {
+                let out = map.remap_u8(img)?;
+                if depth == 16 {
+                    let wide: Vec<u16> = out.data().iter().map(|v| *v as u16 * 257).collect();
+                    dataset_io::encode_png_u16(w, h, &wide, speed).map_err(encode_error)?
+                } else {
+                    dataset_io::encode_png_u8(w, h, 1, out.data(), speed).map_err(encode_error)?
                 }
             }
-            let png = match (&pixels, &frame.image) {
-                (Pixels::Geometric(m), GrayImage::U8(img)) => {
-                    let out = m.remap_u8(img)?;
-                    if depth == 16 {
-                        let wide: Vec<u16> = out.data().iter().map(|v| *v as u16 * 257).collect();
-                        dataset_io::encode_png_u16(w, h, &wide, speed).map_err(encode_error)?
-                    } else {
-                        dataset_io::encode_png_u8(w, h, 1, out.data(), speed).map_err(encode_error)?
-                    }
+            (Pixels::Geometric(map), GrayImage::U16(img)) => {
+                let out = map.remap_u16(img)?;
+                if depth == 16 {
+                    // the values keep their bit depth
+                    dataset_io::encode_png_u16(w, h, out.data(), speed).map_err(encode_error)?
+                } else {
+                    let narrow: Vec<u8> = out
+                        .data()
+                        .iter()
+                        .map(|v| rescale_sample(*v, bits, 255.0) as u8)
+                        .collect();
+                    dataset_io::encode_png_u8(w, h, 1, &narrow, speed).map_err(encode_error)?
                 }
-                (Pixels::Geometric(m), GrayImage::U16(img)) => {
-                    let out = m.remap_u16(img)?;
-                    if depth == 16 {
-                        // the values keep their bit depth
-                        dataset_io::encode_png_u16(w, h, out.data(), speed).map_err(encode_error)?
-                    } else {
-                        let narrow: Vec<u8> = out
-                            .data()
-                            .iter()
-                            .map(|v| rescale_sample(*v, bits, 255.0) as u8)
-                            .collect();
-                        dataset_io::encode_png_u8(w, h, 1, &narrow, speed).map_err(encode_error)?
-                    }
-                }
-                (Pixels::Fast(c, _), GrayImage::U8(img)) => {
-                    let exposure = if irradiance { frame.exposure_ms } else { None };
-                    if depth == 16 {
-                        let mut out = Image::filled(w, h, 0u16);
-                        c.apply(img, exposure, &mut out).with_context(label)?;
-                        dataset_io::encode_png_u16(w, h, out.data(), speed).map_err(encode_error)?
-                    } else {
-                        let mut out = Image::filled(w, h, 0u8);
-                        c.apply(img, exposure, &mut out).with_context(label)?;
-                        dataset_io::encode_png_u8(w, h, 1, out.data(), speed).map_err(encode_error)?
-                    }
-                }
-                (Pixels::Photometric(c, scale), GrayImage::U8(img)) => {
-                    let mut out = Image::filled(w, h, 0f32);
-                    let exposure = if irradiance { frame.exposure_ms } else { None };
+            }
+            (Pixels::Fast(c, _), GrayImage::U8(img)) => {
+                let exposure = if irradiance { frame.exposure_ms } else { None };
+                if depth == 16 {
+                    let mut out = Image::filled(w, h, 0u16);
                     c.apply(img, exposure, &mut out).with_context(label)?;
-                    encode_float(&out, *scale, depth, speed)?
+                    dataset_io::encode_png_u16(w, h, out.data(), speed).map_err(encode_error)?
+                } else {
+                    let mut out = Image::filled(w, h, 0u8);
+                    c.apply(img, exposure, &mut out).with_context(label)?;
+                    dataset_io::encode_png_u8(w, h, 1, out.data(), speed).map_err(encode_error)?
                 }
-                (Pixels::Deep(c, scale), GrayImage::U16(img)) => {
-                    let mut out = Image::filled(w, h, 0f32);
-                    let exposure = if irradiance { frame.exposure_ms } else { None };
-                    c.apply_u16(img, exposure, &mut out).with_context(label)?;
-                    encode_float(&out, *scale, depth, speed)?
-                }
-                (_, image) => {
-                    return Err(PipelineError::Invalid(format!(
+            }
+            (Pixels::Photometric(c, scale), GrayImage::U8(img)) => {
+                let mut out = Image::filled(w, h, 0f32);
+                let exposure = if irradiance { frame.exposure_ms } else { None };
+                c.apply(img, exposure, &mut out).with_context(label)?;
+                encode_float(&out, *scale, depth, speed)?
+            }
+            (Pixels::Deep(c, scale), GrayImage::U16(img)) => {
+                let mut out = Image::filled(w, h, 0f32);
+                let exposure = if irradiance { frame.exposure_ms } else { None };
+                c.apply_u16(img, exposure, &mut out).with_context(label)?;
+                encode_float(&out, *scale, depth, speed)?
+            }
+            (_, image) => {
+                return Err(PipelineError::Invalid(format!(
                     "{}: {}-bit frame in a {in_bits}-bit sequence",
                     label(),
                     image.bits()
                 )))
-                }
-            };
-            let t = if reverse {
-                eval_metrics::BACKWARDS_EPOCH - frame.timestamp
-            } else {
-                frame.timestamp
-            };
-            let e = if irradiance {
-                Some(1.0)
-            } else {
-                frame.exposure_ms
-            };
-            observer.advance(1);
-            Ok((t, e, png))
-        },
-        |(t, e, png)| -> Result<()> {
-            writer.add_frame(
-                TimeRow {
-                    id: ids[done].clone(),
-                    timestamp: t,
-                    exposure_ms: e,
-                },
-                &png,
-            )?;
-            done += 1;
-            Ok(())
-        },
-    );
+            }
+        };
+        let t = if reverse {
+            eval_metrics::BACKWARDS_EPOCH - frame.timestamp
+        } else {
+            frame.timestamp
+        };
+        let e = if irradiance {
+            Some(1.0)
+        } else {
+            frame.exposure_ms
+        };
+        observer.advance(1);
+        Ok((t, e, png))
+    };
+    let sink = |(t, e, png): (f64, Option<f64>, Vec<u8>)| -> Result<()> {
+        writer.add_frame(
+            TimeRow {
+                id: ids[done].clone(),
+                timestamp: t,
+                exposure_ms: e,
+            },
+            &png,
+        )?;
+        done += 1;
+        Ok(())
+    };
+    let written = rayon::in_place_scope(|scope| {
+        if let (Pixels::Geometric(map), Some(v)) = (&pixels, &vignette) {
+            let slot = &mut vignette_png;
+            scope.spawn(move |_| *slot = Some(rectified_vignette(map, v, out_size)));
+        }
+        seq.process_scaled(&indices, threads * 4, half, work, sink)
+    });
     observer.finish();
     written?;
+    if let Some(png) = vignette_png {
+        writer.add_file("vignette.png", &png?)?;
+    }
     let frames = writer.frames();
     let dir = writer.finish()?;
     let seconds = started.elapsed().as_secs_f64();
@@ -697,7 +742,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         fy: k.fy,
         cx: k.cx,
         cy: k.cy,
-        invalid_pixels: map.invalid_count(),
+        invalid_pixels,
         photometric_scale: scale,
         scale_source,
         pixel_value,
