@@ -8,18 +8,26 @@ use camera_model::{output_intrinsics, CameraFile, Image, ImageSize, OutputMode, 
 use crate::Figure;
 
 /// Resets the kernel's peak-RSS counter of this process (Linux); later [`peak_rss_mb`] reads
-/// the peak since then.
-pub fn reset_peak_rss() {
+/// the peak since then. Returns the resident memory at the reset in MB, where the peak starts
+/// from: what the process holds already, among it memory that earlier stages freed and the
+/// allocator kept (0 where /proc is unavailable).
+pub fn reset_peak_rss() -> f64 {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
+    status_mb("VmRSS:")
 }
 
 /// Peak resident memory in MB since the last reset (0 where /proc is unavailable).
 pub fn peak_rss_mb() -> f64 {
+    status_mb("VmHWM:")
+}
+
+/// A memory line of /proc/self/status (`key` with its colon) in MB; 0 where it is missing.
+fn status_mb(key: &str) -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
             s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
+                .find(|l| l.starts_with(key))
                 .and_then(|l| l.split_whitespace().nth(1))
                 .and_then(|v| v.parse::<f64>().ok())
         })
