@@ -151,9 +151,7 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
                 if name == "high_jpeg" {
                     figures.push(Figure::lower("response.seconds", r.seconds, "s"));
                     // the sweep and what the calibration adds to it, over the sweep: not the
-                    // memory the process held before (the allocator keeps some of what
-                    // earlier stages freed, which moved this figure by 1.3 when the rectify
-                    // stage changed)
+                    // rest of the process's memory (the binary, earlier stages' data)
                     let sweep_mb = (sw * sh * sn) as f64 / 1048576.0;
                     figures.push(Figure::lower(
                         "response.peak_memory_over_sweep",
