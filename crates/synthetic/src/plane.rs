@@ -218,8 +218,9 @@ impl PlaneSequence {
         0.78 + 0.12 * (self.texture.texture(x * 0.6, y * 0.6) - 0.5).clamp(-1.0, 1.0)
     }
 
-    /// Renders frame `i` as 8-bit grey, before compression (2x2 supersampled: see
-    /// [`PlaneSequence::energy`]).
+    /// Renders frame `i` as 8-bit grey, before compression, 2x2 supersampled: the mean
+    /// radiance of four sub-pixel rays where one of them is on the marker or off the plane,
+    /// elsewhere the wall's texture at the rays' mean point.
     pub fn render(&self, i: usize) -> Vec<u8> {
         let (w, h) = (self.config.width, self.config.height);
         self.config.sensor.capture(
