@@ -291,22 +291,32 @@ fn rectified_vignette(
         .map_err(encode_error)
 }
 
-/// The inverse response of `pcalib.txt` (with the parser's notes and the file's path) and
-/// the vignette of `vignette.png`, each when the sequence has it; for frames decoded at
-/// half size, the vignette averaged over the same 2x2 blocks.
-#[allow(clippy::type_complexity)]
+/// A sequence's `pcalib.txt`, read once: its text (copied as it is into a geometric output),
+/// the inverse response and the parser's notes.
+struct ResponseFile {
+    path: PathBuf,
+    text: String,
+    response: InverseResponse,
+    notes: Vec<String>,
+}
+
+/// The sequence's `pcalib.txt` and `vignette.png`, each when it has them; for frames decoded
+/// at half size, the vignette averaged over the same 2x2 blocks.
 fn read_calibration(
     seq: &Sequence,
     half: bool,
-) -> Result<(
-    Option<(InverseResponse, Vec<String>, PathBuf)>,
-    Option<photometric::Vignette>,
-)> {
+) -> Result<(Option<ResponseFile>, Option<photometric::Vignette>)> {
     let response = match &seq.pcalib_path {
         Some(p) => {
-            let (u, notes) = InverseResponse::parse_with_notes(&dataset_io::read_text(p)?)
+            let text = dataset_io::read_text(p)?;
+            let (response, notes) = InverseResponse::parse_with_notes(&text)
                 .with_context(|| p.display().to_string())?;
-            Some((u, notes, p.clone()))
+            Some(ResponseFile {
+                path: p.clone(),
+                text,
+                response,
+                notes,
+            })
         }
         None => None,
     };
@@ -455,13 +465,13 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             ));
         }
     }
-    let (response, vignette) = calibration?;
-    let response = response.map(|(u, notes, p)| {
-        for n in notes {
-            observer.warn(&format!("{}: {n}", p.display()));
+    let (pcalib, vignette) = calibration?;
+    if let Some(f) = &pcalib {
+        for n in &f.notes {
+            observer.warn(&format!("{}: {n}", f.path.display()));
         }
-        u
-    });
+    }
+    let response = pcalib.as_ref().map(|f| &f.response);
     // 16-bit frames with a 2^k-value table (k < 16) and no --bit-depth: the values are k-bit
     // values in the low bits, as DSO and DM-VIO index the table (`G[pixel]`)
     if let (None, true, true, Some(r)) = (bit_depth, deep, photometric, &response) {
@@ -604,8 +614,8 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         CameraFile::rectified(k, out_size).to_text().as_bytes(),
     )?;
     if !photometric {
-        if let (Some(p), Some(_)) = (&seq.pcalib_path, &response) {
-            writer.add_file("pcalib.txt", dataset_io::read_text(p)?.as_bytes())?;
+        if let Some(f) = &pcalib {
+            writer.add_file("pcalib.txt", f.text.as_bytes())?;
         }
     }
     // the ground truth is indexed by timestamp: still valid unless the timestamps are mapped
@@ -621,8 +631,6 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
     let reverse = args.reverse;
     let sample_max = (1u32 << bits) - 1;
     let speed = args.compression.png();
-    // the rectified vignette (geometric output only) is made by one of the pool's threads
-    // while the other decodes the first frames, off the path to the first frame
     let mut vignette_png = None;
     let work = |frame: dataset_io::NativeFrame| -> Result<(f64, Option<f64>, Vec<u8>)> {
         let (w, h) = (out_size.width, out_size.height);
@@ -717,6 +725,8 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         Ok(())
     };
     let written = rayon::in_place_scope(|scope| {
+        // the rectified vignette (geometric output only) is made by one of the pool's threads
+        // while the other decodes the first frames, off the path to the first frame
         if let (Pixels::Geometric(map), Some(v)) = (&pixels, &vignette) {
             let slot = &mut vignette_png;
             scope.spawn(move |_| *slot = Some(rectified_vignette(map, v, out_size)));
