@@ -356,7 +356,7 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
         )
         .round() as u8
     });
-    let written = written_pipeline(&jpegs, &seq, if quick { 60 } else { 300 })?;
+    let written = written_pipeline(&jpegs, &seq, &resp, &vig, if quick { 60 } else { 300 })?;
     println!(
         "  written sequence ({} threads): decode only {:.0} fps, monovo rectify (zip read, decode, remap, PNG, write) {:.0} fps, ratio {:.2}; --compression none {:.0} fps, ratio {:.2}",
         rayon::current_num_threads(),
@@ -435,13 +435,16 @@ fn rectify(quick: bool) -> Result<Vec<Figure>> {
 }
 
 /// The whole `monovo rectify` against decoding alone, on the current thread pool, in one run:
-/// `frames` frames (the `jpegs` in turn) are written as a zipped sequence folder, then read
+/// `frames` frames (the `jpegs` in turn) are written as a zipped sequence folder with the
+/// sequence's `response` and `vignette` as pcalib.txt and vignette.png, then read
 /// and decoded (nothing else), and rectified by `rectify_sequence` into PNG frames on disk,
 /// compressed (the default) and stored. Each is run twice, alternately, and the faster run
 /// of each counts.
 fn written_pipeline(
     jpegs: &[Vec<u8>],
     seq: &synthetic::scene::SyntheticSequence,
+    response: &photometric::InverseResponse,
+    vignette: &photometric::Vignette,
     frames: usize,
 ) -> Result<Written> {
     use monovo_pipelines::rectify::{rectify_sequence, FrameCompression, RectifyJob};
@@ -462,12 +465,7 @@ fn written_pipeline(
     std::fs::write(input.join("camera.txt"), seq.camera.camera_txt((640, 480)))?;
     // the calibration files every sequence of the dataset has: the rectified sequence gets
     // the vignette remapped, and reading them is part of a run's fixed cost
-    std::fs::write(
-        input.join("pcalib.txt"),
-        photometric::InverseResponse::new(seq.response)?.to_text(),
-    )?;
-    let vignette =
-        photometric::Vignette::from_values(Image::new(1280, 1024, seq.vignette.clone())?)?;
+    std::fs::write(input.join("pcalib.txt"), response.to_text())?;
     std::fs::write(
         input.join("vignette.png"),
         dataset_io::encode_png_u16(
