@@ -65,6 +65,7 @@ pub fn run(
     let t = Instant::now();
     let cal = photometric::calibrate_response(&mut imgs, &sweep.exposures_ms, opts, &|_, _| {})?;
     let seconds = t.elapsed().as_secs_f64();
+    let peak_mb = peak_rss_mb();
     let u = cal.response.values();
     let (max, rms) = cal.response.errors_against(&sweep.response);
     let increasing = (1..256).all(|k| u[k] > u[k - 1]);
@@ -79,8 +80,8 @@ pub fn run(
         rms,
         seconds,
         iterations: cal.iterations,
-        peak_mb: peak_rss_mb(),
-        added_mb: (peak_rss_mb() - before).max(0.0),
+        peak_mb,
+        added_mb: (peak_mb - before).max(0.0),
         increasing,
         within_2sigma: within,
     })

@@ -466,14 +466,11 @@ fn written_pipeline(
     // the calibration files every sequence of the dataset has: the rectified sequence gets
     // the vignette remapped, and reading them is part of a run's fixed cost
     std::fs::write(input.join("pcalib.txt"), response.to_text())?;
+    let v16 = vignette.to_u16();
+    let (vw, vh) = v16.size();
     std::fs::write(
         input.join("vignette.png"),
-        dataset_io::encode_png_u16(
-            1280,
-            1024,
-            vignette.to_u16().data(),
-            dataset_io::PngSpeed::Default,
-        )?,
+        dataset_io::encode_png_u16(vw, vh, v16.data(), dataset_io::PngSpeed::Default)?,
     )?;
     let decode_only = || -> Result<f64> {
         let t0 = Instant::now();

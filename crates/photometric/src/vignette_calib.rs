@@ -642,6 +642,15 @@ fn prefetch<T>(p: *const T) {
     let _ = p;
 }
 
+/// [`prefetch`]es the two rows of the bilinear taps whose first is `cells[at]`, `grid`
+/// cells per row.
+#[inline(always)]
+fn prefetch_taps<T>(cells: &[T], at: usize, grid: usize) {
+    let p = cells.as_ptr().wrapping_add(at);
+    prefetch(p);
+    prefetch(p.wrapping_add(grid));
+}
+
 /// How many observations ahead the lookups of `C` ([`PassCtx::dense`]) and the additions
 /// to the C step's sums ([`Splats::add`]) ask for their cells: both wait on cache misses
 /// (the plane's arrays are megabytes). 2-3% of a calibration (150 frames of 640x512, eight
@@ -1255,9 +1264,7 @@ impl PassCtx<'_, '_> {
         let obs = &mut sc.obs[..n];
         for j in 0..n {
             if let Some(&ahead) = at.get(j + PREFETCH_AHEAD) {
-                let p = c.as_ptr().wrapping_add(ahead as usize);
-                prefetch(p);
-                prefetch(p.wrapping_add(grid));
+                prefetch_taps(c, ahead as usize, grid);
             }
             let a = (at[j] as usize).min(at_max);
             t0[j] = c[a] as f64;
@@ -1468,9 +1475,7 @@ impl Splats {
         let pending = &self.pending[b * self.cap..b * self.cap + n];
         for (i, s) in pending.iter().enumerate() {
             if let Some(ahead) = pending.get(i + PREFETCH_AHEAD) {
-                let p = cacc.as_ptr().wrapping_add(ahead.at as usize);
-                prefetch(p);
-                prefetch(p.wrapping_add(grid));
+                prefetch_taps(cacc, ahead.at as usize, grid);
             }
             let a = s.at as usize;
             lo = lo.min(a);
