@@ -88,17 +88,19 @@ impl FovCamera {
         }
     }
 
-    /// camera.txt text (legacy relative FOV line; output `crop` at `out`).
+    /// camera.txt text as the dataset's own files have it: line 1 the relative FOV camera as
+    /// five bare numbers (no model name: the form DSO reads as FOV and the only one the
+    /// authors' 2016 tools read), output `crop` at `out`.
     pub fn camera_txt(&self, out: (usize, usize)) -> String {
         self.camera_txt_with(out, "crop")
     }
 
-    /// camera.txt text with the output camera `mode` (line 3: `crop`, `full`, `none` or a
-    /// pinhole `fx fy cx cy 0`) at `out`.
+    /// camera.txt text (as [`FovCamera::camera_txt`]) with the output camera `mode` (line 3:
+    /// `crop`, `full`, `none` or a pinhole `fx fy cx cy 0`) at `out`.
     pub fn camera_txt_with(&self, out: (usize, usize), mode: &str) -> String {
         let (w, h) = (self.width as f64, self.height as f64);
         format!(
-            "FOV {} {} {} {} {}\n{} {}\n{mode}\n{} {}\n",
+            "{} {} {} {} {}\n{} {}\n{mode}\n{} {}\n",
             self.fx / w,
             self.fy / h,
             (self.cx + 0.5) / w,
