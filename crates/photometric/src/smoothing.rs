@@ -161,7 +161,8 @@ fn local_linear(
 /// variance is asked), in one parallel batch of blurs: maps with the same pixels missing
 /// share the blurs of the weights' moments (the maps of the odd and of the even frames
 /// mostly do), so that only the three moments of their values are blurred for each. The
-/// same numbers as one [`local_linear`] per map.
+/// same numbers as one [`local_linear`] per map; a map whose variance is not asked gets an
+/// empty variance (a full-size map of NaN would only take memory).
 fn local_linear_many(
     maps: &[(&[f64], bool)],
     wt: &[f64],
@@ -173,10 +174,14 @@ fn local_linear_many(
     if r == 0 {
         return maps
             .iter()
-            .map(|(v, _)| {
-                let var = (0..n)
-                    .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
-                    .collect();
+            .map(|&(v, variance)| {
+                let var = if variance {
+                    (0..n)
+                        .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
                 (v.to_vec(), var)
             })
             .collect();
@@ -329,7 +334,12 @@ fn local_linear_many(
                     (None, _) => (sv[i] / s0[i], f64::NAN),
                 }
             };
-            (0..n).into_par_iter().with_min_len(4096).map(fit).unzip()
+            let pixels = (0..n).into_par_iter().with_min_len(4096);
+            if variance {
+                pixels.map(fit).unzip()
+            } else {
+                (pixels.map(|i| fit(i).0).collect(), Vec::new())
+            }
         })
         .collect()
 }

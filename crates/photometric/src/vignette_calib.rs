@@ -2585,8 +2585,15 @@ pub fn calibrate_vignette(
         (None, None) => pass(&problem, &model, &tables, Step::V, true)?.0,
     };
     drop(store);
+    // the problem's arrays (the rays, the visiting order, the coarse stage's) are not
+    // needed any more: gone before the smoothing, the run's largest use of memory after
+    // the solver
+    drop(problem);
+    drop(coarse);
+    drop(rays);
     finish(
-        &problem,
+        size,
+        options,
         model,
         vs,
         Solved {
@@ -2853,7 +2860,8 @@ fn median_std_error(v: &[f64], den: &[f64]) -> f64 {
 /// Normalisation, the odd/even maps, the uncertainty, the smoothing and the checks of the
 /// result.
 fn finish(
-    p: &Problem<'_>,
+    size: ImageSize,
+    options: &VignetteOptions,
     model: Model,
     vs: VSums,
     solved: Solved,
@@ -2866,9 +2874,9 @@ fn finish(
         outside,
         components,
     } = solved;
-    let (w, h) = (p.size.width, p.size.height);
+    let (w, h) = (size.width, size.height);
     let npx = w * h;
-    let min_obs = p.options.min_observations.max(1);
+    let min_obs = options.min_observations.max(1);
     let valid: Vec<bool> = (0..npx)
         .map(|i| {
             vs.counts[i] >= min_obs && vs.den[i] > 0.0 && !outside.get(i).copied().unwrap_or(false)
@@ -2943,7 +2951,24 @@ fn finish(
     let raw_var: Vec<f64> = (0..npx)
         .map(|i| if valid[i] { kappa / info[i] } else { f64::NAN })
         .collect();
-    let choice = choose_smoothing(w, h, &raw, &raw_var, &odd, &even, p.options.smoothing_px)?;
+    // what is left of the sums, and of the model, is a few numbers and the counts: the
+    // per-pixel sums (and V, copied into `raw`) go before the smoothing
+    drop(info_even);
+    let VSums {
+        num,
+        den,
+        num_odd,
+        den_odd,
+        counts,
+        res2,
+        pred2,
+        outliers,
+        ..
+    } = vs;
+    drop((num, den, num_odd, den_odd));
+    let noise = model.noise;
+    drop(model);
+    let choice = choose_smoothing(w, h, &raw, &raw_var, &odd, &even, options.smoothing_px)?;
     // scale: the recommended map's maximum is 1
     let max = choice
         .smoothed
@@ -3006,21 +3031,21 @@ fn finish(
         })
         .collect();
     let raw_std_error = to_img(&raw_std, max)?;
-    let rms_relative = (vs.res2 / vs.pred2.max(1e-300)).sqrt();
+    let rms_relative = (res2 / pred2.max(1e-300)).sqrt();
     Ok(VignetteCalibration {
         vignette,
         raw: raw_img,
         std_error,
         raw_std_error,
-        counts: Image::new(w, h, vs.counts.clone())?,
+        counts: Image::new(w, h, counts)?,
         coverage,
         smoothing: choice.choice,
         iterations,
         converged,
         change,
         rms_relative,
-        noise: model.noise,
-        outliers: vs.outliers,
+        noise,
+        outliers,
         components,
         warnings,
     })
