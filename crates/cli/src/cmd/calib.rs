@@ -397,6 +397,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
         used,
         skipped,
         bits,
+        jpeg,
         ..
     } = run;
     let skipped_total: usize = skipped.values().sum();
@@ -442,6 +443,7 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
                 "smoothing_cross_validated": cal.smoothing.cross_validated,
                 "smoothing_scores": cal.smoothing.scores,
                 "defective_pixels": cal.smoothing.defects,
+                "jpeg_frames": jpeg,
                 "outliers": cal.outliers,
                 "std_median": sd_median,
                 "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
@@ -462,10 +464,15 @@ fn run_vignette(a: &VignetteArgs) -> Result<()> {
             cal.outliers
         )?;
         outln!(
-            "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out",
+            "{:.1}% of the pixels observed {} times or more; {} defective pixel(s) left out{}",
             100.0 * cal.coverage,
             options.min_observations,
-            cal.smoothing.defects
+            cal.smoothing.defects,
+            if jpeg && cal.smoothing.defects > 0 {
+                " (hot, dead, or biased by the JPEG compression)"
+            } else {
+                ""
+            }
         )?;
         outln!(
             "smoothing of {}: {:.1} px ({}); median standard error {:.3}%",
