@@ -278,6 +278,9 @@ fn vignette_calibration_with_markers_and_with_poses() {
         assert!(v["frames_used"].as_u64().unwrap() >= 55, "{v}");
         assert!(v["coverage"].as_f64().unwrap() >= 0.98, "{v}");
         assert_eq!(v["smoothing_cross_validated"], true, "{v}");
+        // `synth vignette` stores JPEG frames (quality 90), whose compression the defect
+        // count then includes (the text output says so)
+        assert_eq!(v["jpeg_frames"], true, "{v}");
         // the written maps against the truth: the recommended one within 0.3% here (60
         // frames of 320x256; bench-synthetic checks 0.15% on 150 frames of 640x512), the raw
         // one within 1.5%
@@ -568,6 +571,8 @@ fn twelve_bit_vignette_end_to_end() {
         "{}",
         stdout(&o)
     );
+    // lossless (16-bit PNG) frames: no word of JPEG in the defect count
+    assert!(!stdout(&o).contains("JPEG"), "{}", stdout(&o));
     let read = |p: &std::path::Path| {
         let map = dataset_io::read_gray_map(p).unwrap().0;
         photometric::Vignette::from_u16(&map).unwrap()
