@@ -95,6 +95,7 @@ pub struct Sequence {
     camera: Option<CameraFile>,
     size: ImageSize,
     bits: u32,
+    jpeg: bool,
     /// `pcalib.txt`, if present.
     pub pcalib_path: Option<PathBuf>,
     /// `vignette.png`, if present.
@@ -168,6 +169,12 @@ pub const JPEG_DECODER: &str = if cfg!(feature = "turbojpeg") {
 /// ([`decode_jpeg_gray8_half`]): built with the `turbojpeg` feature.
 pub const HALF_DECODE: bool = cfg!(feature = "turbojpeg");
 
+/// Whether `bytes` start as a JPEG file does (the start-of-image marker): how every decoder
+/// here tells JPEG from PNG and PGM.
+fn is_jpeg(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0xFF, 0xD8])
+}
+
 /// Decodes a JPEG to 8-bit grey at half its width and height (rounded up) in the DCT domain:
 /// libjpeg-turbo computes each 8x8 block's inverse DCT at 4x4, so output pixel `(i, j)` is
 /// close to the mean of the 2x2 input pixels from `(2i, 2j)`, centred at `(2i + 0.5, 2j +
@@ -175,7 +182,7 @@ pub const HALF_DECODE: bool = cfg!(feature = "turbojpeg");
 /// entropy decoding, most of the time, stays). Needs the `turbojpeg` feature; without it the
 /// error says so. Only JPEG.
 pub fn decode_jpeg_gray8_half(bytes: &[u8]) -> Result<Image<u8>, String> {
-    if !bytes.starts_with(&[0xFF, 0xD8]) {
+    if !is_jpeg(bytes) {
         return Err("half-size decoding needs JPEG frames (DCT-domain scaling)".into());
     }
     #[cfg(feature = "turbojpeg")]
@@ -190,7 +197,7 @@ pub fn decode_jpeg_gray8_half(bytes: &[u8]) -> Result<Image<u8>, String> {
 /// Decodes JPEG, PNG or PGM bytes to 8-bit grey (colour images are converted to luma; 16-bit
 /// images are scaled down). The error text says what failed.
 pub fn decode_gray8(bytes: &[u8]) -> Result<Image<u8>, String> {
-    if bytes.starts_with(&[0xFF, 0xD8]) {
+    if is_jpeg(bytes) {
         return decode_jpeg_gray8(bytes);
     }
     let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
@@ -227,7 +234,7 @@ pub fn decode_gray16(bytes: &[u8]) -> Result<(Image<u16>, bool), String> {
 /// their values (a 12-bit sensor's values stay in the low 12 bits), colour is converted to
 /// luma. The error text says what failed.
 pub fn decode_gray(bytes: &[u8]) -> Result<GrayImage, String> {
-    if bytes.starts_with(&[0xFF, 0xD8]) {
+    if is_jpeg(bytes) {
         return decode_jpeg_gray8(bytes).map(GrayImage::U8);
     }
     let img = image::load_from_memory(bytes).map_err(|e| format!("cannot decode image: {e}"))?;
@@ -430,11 +437,14 @@ impl Sequence {
             camera: None,
             size: ImageSize::new(0, 0),
             bits: 8,
+            jpeg: false,
             pcalib_path: optional(dir, "pcalib.txt"),
             vignette_path: optional(dir, "vignette.png"),
             ground_truth_path: optional(dir, "groundtruthSync.txt"),
         };
-        let first = seq.decode_native(0)?;
+        let first = seq.raw(0)?;
+        seq.jpeg = is_jpeg(&first);
+        let first = decode_gray(&first).map_err(|m| DatasetError::invalid(seq.label(0), m))?;
         let (fw, fh) = first.size();
         seq.size = ImageSize::new(fw, fh);
         seq.bits = first.bits();
@@ -499,6 +509,11 @@ impl Sequence {
     /// Bits per sample of the image files (8, or 16 for 16-bit PNG/PGM), from the first.
     pub fn bits_per_sample(&self) -> u32 {
         self.bits
+    }
+
+    /// Whether the image files are JPEG (the first one, as its bytes tell the decoders).
+    pub fn is_jpeg(&self) -> bool {
+        self.jpeg
     }
 
     /// Whether the images come from images.zip.

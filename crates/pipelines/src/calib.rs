@@ -807,10 +807,7 @@ pub fn calibrate_vignette_sequence(
         frames: seq.len(),
         skipped,
         bits: deep.map_or(8, |d| d.bits),
-        jpeg: seq.names().iter().any(|n| {
-            let n = n.to_ascii_lowercase();
-            n.ends_with(".jpg") || n.ends_with(".jpeg")
-        }),
+        jpeg: seq.is_jpeg(),
     })
 }
 
