@@ -1,12 +1,8 @@
 //! Atomic writes and results trees.
 use dataset_io::{parse_run_name, scan_ground_truths, scan_results, write_atomic, DatasetError};
-use std::path::PathBuf;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("dataset-io-it-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> crate::TempDir {
+    crate::TempDir::new("it", name)
 }
 
 #[test]

@@ -4,13 +4,10 @@ use dataset_io::{
     encode_jpeg_gray, encode_png_u8, parse_times, write_images_zip, DatasetError, PngSpeed,
     Sequence, SequenceWriter, TimeRow,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("dataset-io-seq-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> crate::TempDir {
+    crate::TempDir::new("seq", name)
 }
 
 fn pattern(i: usize, w: usize, h: usize) -> Vec<u8> {
