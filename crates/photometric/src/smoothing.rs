@@ -63,64 +63,92 @@ fn radius_for_sigma(sigma: f64) -> usize {
 /// Rows whose running sums [`box_rows`] takes side by side.
 const ROWS_AT_ONCE: usize = 4;
 
-/// One box pass of radius `r` along rows (zero outside the image), from each row's running
-/// sums. [`ROWS_AT_ONCE`] rows at a time: a row's running sum waits on each of its additions,
-/// the sums of several rows are independent and the core overlaps them (the same additions
-/// in the same order: the same numbers).
-fn box_rows(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
+/// Columns that [`box_cols`] takes through its passes at once: a strip of the image that
+/// stays in the core's cache (two copies of 1024 rows: 512 KiB).
+const COLS_AT_ONCE: usize = 32;
+
+/// `passes` box passes of radius `r` along the rows of `a` (zero outside the image), in
+/// place: [`ROWS_AT_ONCE`] rows at a time go through all the passes in a buffer that stays in
+/// the core's cache (the image goes through memory once, not once per pass), each pass from
+/// the rows' running sums. A row's running sum waits on each of its additions, the sums of
+/// several rows are independent and the core overlaps them (the same additions in the same
+/// order as one row at a time: the same numbers).
+fn box_rows(a: &mut [f64], w: usize, h: usize, r: usize, passes: usize) {
     const K: usize = ROWS_AT_ONCE;
-    // prefix[x][i]: the sum of the first x values of row y0 + i (prefix[0] stays 0)
+    // rows[x][i]: row y0 + i at x (rows past the image's last are zeros, never written
+    // back); prefix[x][i]: the sum of its first x values (prefix[0] stays 0)
+    let mut rows = vec![[0.0f64; K]; w];
     let mut prefix = vec![[0.0f64; K]; w + 1];
     for y0 in (0..h).step_by(K) {
         let k = K.min(h - y0);
-        let rows: Vec<&[f64]> = (y0..y0 + k).map(|y| &src[y * w..(y + 1) * w]).collect();
-        if let [r0, r1, r2, r3] = rows[..] {
-            for x in 0..w {
-                let p = prefix[x];
-                prefix[x + 1] = [p[0] + r0[x], p[1] + r1[x], p[2] + r2[x], p[3] + r3[x]];
-            }
-        } else {
-            for x in 0..w {
-                let mut p = prefix[x];
-                for (pi, row) in p.iter_mut().zip(&rows) {
-                    *pi += row[x];
-                }
-                prefix[x + 1] = p;
+        for (i, src) in a[y0 * w..(y0 + k) * w].chunks_exact(w).enumerate() {
+            for (dst, v) in rows.iter_mut().zip(src) {
+                dst[i] = *v;
             }
         }
-        for i in 0..k {
-            let o = &mut out[(y0 + i) * w..(y0 + i + 1) * w];
-            for (x, ox) in o.iter_mut().enumerate() {
+        for dst in rows.iter_mut() {
+            dst[k..].fill(0.0);
+        }
+        for _ in 0..passes {
+            for x in 0..w {
+                let (p, v) = (prefix[x], rows[x]);
+                prefix[x + 1] = [p[0] + v[0], p[1] + v[1], p[2] + v[2], p[3] + v[3]];
+            }
+            for (x, v) in rows.iter_mut().enumerate() {
                 let lo = x.saturating_sub(r);
                 let hi = (x + r + 1).min(w);
-                *ox = prefix[hi][i] - prefix[lo][i];
+                let (ph, pl) = (prefix[hi], prefix[lo]);
+                *v = [ph[0] - pl[0], ph[1] - pl[1], ph[2] - pl[2], ph[3] - pl[3]];
+            }
+        }
+        for (i, dst) in a[y0 * w..(y0 + k) * w].chunks_exact_mut(w).enumerate() {
+            for (d, v) in dst.iter_mut().zip(&rows) {
+                *d = v[i];
             }
         }
     }
 }
 
-/// One box pass of radius `r` along columns: a window of rows slides down the image, so
-/// that every row is read in order (a column at a time would stride through memory).
-fn box_cols(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
-    let row = |y: usize| &src[y * w..(y + 1) * w];
-    let mut acc = vec![0.0f64; w];
-    for y in 0..(r + 1).min(h) {
-        for (a, v) in acc.iter_mut().zip(row(y)) {
-            *a += v;
+/// `passes` box passes of radius `r` along the columns of `a`, in place: a strip of
+/// [`COLS_AT_ONCE`] columns at a time goes through all the passes in buffers that stay in the
+/// core's cache; in each pass a window of rows slides down the strip (its running sums: the
+/// same additions in the same order as down the whole image, the same numbers).
+fn box_cols(a: &mut [f64], w: usize, h: usize, r: usize, passes: usize) {
+    const S: usize = COLS_AT_ONCE;
+    let mut strip = vec![0.0f64; h * S];
+    let mut out = vec![0.0f64; h * S];
+    for x0 in (0..w).step_by(S) {
+        let s = S.min(w - x0);
+        for (y, dst) in strip.chunks_exact_mut(S).enumerate() {
+            dst[..s].copy_from_slice(&a[y * w + x0..y * w + x0 + s]);
         }
-    }
-    for y in 0..h {
-        out[y * w..(y + 1) * w].copy_from_slice(&acc);
-        // the window of row y + 1: rows y + 1 - r ..= y + 1 + r
-        if y + r + 1 < h {
-            for (a, v) in acc.iter_mut().zip(row(y + r + 1)) {
-                *a += v;
+        for _ in 0..passes {
+            let mut acc = [0.0f64; S];
+            for row in strip.chunks_exact(S).take(r + 1) {
+                for (c, v) in acc.iter_mut().zip(row) {
+                    *c += v;
+                }
             }
+            for y in 0..h {
+                out[y * S..(y + 1) * S].copy_from_slice(&acc);
+                // the window of row y + 1: rows y + 1 - r ..= y + 1 + r
+                if y + r + 1 < h {
+                    let add = &strip[(y + r + 1) * S..(y + r + 2) * S];
+                    for (c, v) in acc.iter_mut().zip(add) {
+                        *c += v;
+                    }
+                }
+                if y >= r {
+                    let sub = &strip[(y - r) * S..(y - r + 1) * S];
+                    for (c, v) in acc.iter_mut().zip(sub) {
+                        *c -= v;
+                    }
+                }
+            }
+            std::mem::swap(&mut strip, &mut out);
         }
-        if y >= r {
-            for (a, v) in acc.iter_mut().zip(row(y - r)) {
-                *a -= v;
-            }
+        for (y, src) in strip.chunks_exact(S).enumerate() {
+            a[y * w + x0..y * w + x0 + s].copy_from_slice(&src[..s]);
         }
     }
 }
@@ -129,15 +157,8 @@ fn box_cols(src: &[f64], w: usize, h: usize, r: usize, out: &mut [f64]) {
 /// (unnormalised: the sums are ratios of smoothed images).
 fn blur(src: Vec<f64>, w: usize, h: usize, r: usize) -> Vec<f64> {
     let mut a = src;
-    let mut b = vec![0.0f64; a.len()];
-    for _ in 0..3 {
-        box_rows(&a, w, h, r, &mut b);
-        std::mem::swap(&mut a, &mut b);
-    }
-    for _ in 0..3 {
-        box_cols(&a, w, h, r, &mut b);
-        std::mem::swap(&mut a, &mut b);
-    }
+    box_rows(&mut a, w, h, r, 3);
+    box_cols(&mut a, w, h, r, 3);
     a
 }
 
@@ -230,6 +251,7 @@ fn local_linear_many(
         }
     }
     tasks.extend((0..maps.len()).flat_map(|j| (0..3).map(move |m| Src::Values(j, m))));
+    // (one loop per kind of moment: the choice is made once per row, not per pixel)
     let moment = |src: Src| -> Vec<f64> {
         let mut out = vec![0.0f64; n];
         let (wv, val, m) = match src {
@@ -238,27 +260,25 @@ fn local_linear_many(
         };
         for (y, row) in out.chunks_mut(w.max(1)).enumerate() {
             let yv = yrow[y];
-            for (x, o) in row.iter_mut().enumerate() {
-                let i = y * w + x;
-                let (a, xv) = (wv[i], xcol[x]);
-                *o = match val {
-                    None => match m {
-                        0 => a,
-                        1 => a * xv,
-                        2 => a * yv,
-                        3 => a * xv * xv,
-                        4 => a * xv * yv,
-                        _ => a * yv * yv,
-                    },
-                    Some(v) => {
-                        let vi = if v[i].is_finite() { v[i] } else { 0.0 };
-                        match m {
-                            0 => a * vi,
-                            1 => a * vi * xv,
-                            _ => a * vi * yv,
-                        }
+            let span = y * w..y * w + row.len();
+            let (a, xs) = (&wv[span.clone()], &xcol[..row.len()]);
+            let ax = row.iter_mut().zip(a).zip(xs);
+            match (val, m) {
+                (None, 0) => row.copy_from_slice(a),
+                (None, 1) => ax.for_each(|((o, a), xv)| *o = a * xv),
+                (None, 2) => row.iter_mut().zip(a).for_each(|(o, a)| *o = a * yv),
+                (None, 3) => ax.for_each(|((o, a), xv)| *o = a * xv * xv),
+                (None, 4) => ax.for_each(|((o, a), xv)| *o = a * xv * yv),
+                (None, _) => row.iter_mut().zip(a).for_each(|(o, a)| *o = a * yv * yv),
+                (Some(v), m) => {
+                    let finite = |v: &f64| if v.is_finite() { *v } else { 0.0 };
+                    let vals = ax.zip(&v[span]);
+                    match m {
+                        0 => vals.for_each(|(((o, a), _), v)| *o = a * finite(v)),
+                        1 => vals.for_each(|(((o, a), xv), v)| *o = a * finite(v) * xv),
+                        _ => vals.for_each(|(((o, a), _), v)| *o = a * finite(v) * yv),
                     }
-                };
+                }
             }
         }
         out
