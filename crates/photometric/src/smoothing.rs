@@ -75,6 +75,9 @@ const COLS_AT_ONCE: usize = 32;
 /// order as one row at a time: the same numbers).
 fn box_rows(a: &mut [f64], w: usize, h: usize, r: usize, passes: usize) {
     const K: usize = ROWS_AT_ONCE;
+    if w == 0 || h == 0 {
+        return;
+    }
     // rows[x][i]: row y0 + i at x (rows past the image's last are zeros, never written
     // back); prefix[x][i]: the sum of its first x values (prefix[0] stays 0)
     let mut rows = vec![[0.0f64; K]; w];
@@ -115,6 +118,9 @@ fn box_rows(a: &mut [f64], w: usize, h: usize, r: usize, passes: usize) {
 /// same additions in the same order as down the whole image, the same numbers).
 fn box_cols(a: &mut [f64], w: usize, h: usize, r: usize, passes: usize) {
     const S: usize = COLS_AT_ONCE;
+    if w == 0 || h == 0 {
+        return;
+    }
     let mut strip = vec![0.0f64; h * S];
     let mut out = vec![0.0f64; h * S];
     for x0 in (0..w).step_by(S) {
@@ -795,6 +801,52 @@ mod tests {
             flagged_any += exact.iter().filter(|f| **f).count();
         }
         assert!(flagged_any > 50, "{flagged_any} pixels flagged in all");
+    }
+
+    /// The cache-friendly blur is three plain box sums in each direction (zero outside),
+    /// at image sizes around the strip and row-group widths and radii past the image.
+    #[test]
+    fn blur_is_three_box_sums_each_way() {
+        let box_sum = |v: &[f64], w: usize, h: usize, r: usize, along_rows: bool| -> Vec<f64> {
+            (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as isize, (i / w) as isize);
+                    (-(r as isize)..=r as isize)
+                        .map(|d| {
+                            let (xx, yy) = if along_rows { (x + d, y) } else { (x, y + d) };
+                            if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
+                                0.0
+                            } else {
+                                v[yy as usize * w + xx as usize]
+                            }
+                        })
+                        .sum()
+                })
+                .collect()
+        };
+        let mut rng = synthetic::Rng::new(5);
+        for (w, h, r) in [
+            (1, 1, 1),
+            (3, 7, 2),
+            (33, 5, 1),
+            (31, 9, 4),
+            (65, 13, 3),
+            (7, 40, 30),
+        ] {
+            let v: Vec<f64> = (0..w * h).map(|_| rng.uniform() - 0.3).collect();
+            let mut want = v.clone();
+            for along_rows in [true, true, true, false, false, false] {
+                want = box_sum(&want, w, h, r, along_rows);
+            }
+            let got = blur(v, w, h, r);
+            for (g, e) in got.iter().zip(&want) {
+                assert!(
+                    (g - e).abs() <= 1e-9 * (1.0 + e.abs()),
+                    "{w}x{h} r {r}: {g} vs {e}"
+                );
+            }
+        }
+        assert!(blur(Vec::new(), 0, 0, 3).is_empty());
     }
 
     /// The count decides the usual pixel alone, and never a defect's.
