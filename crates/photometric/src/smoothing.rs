@@ -14,7 +14,7 @@
 
 use rayon::prelude::*;
 
-use crate::stats::median;
+use crate::stats::small_median;
 use crate::PhotometricError;
 
 /// Which smoothing was applied and why.
@@ -436,7 +436,7 @@ fn find_defects_screened(w: usize, h: usize, raw: &[f64], wt: &[f64], screen: bo
                 // (fewer than three: no slope that way)
                 let slope = |buf: &mut [f64], n: usize| {
                     if n >= 3 {
-                        median(&mut buf[..n])
+                        small_median(&mut buf[..n])
                     } else {
                         0.0
                     }
@@ -477,7 +477,7 @@ fn find_defects_screened(w: usize, h: usize, raw: &[f64], wt: &[f64], screen: bo
                     continue;
                 }
                 // (at least four neighbours: never the NaN of no value)
-                let reference = median(&mut buf[..n]);
+                let reference = small_median(&mut buf[..n]);
                 let z = (raw[i] - reference) * scale;
                 *flag = z.abs() > DEFECT_SIGMAS;
             }
