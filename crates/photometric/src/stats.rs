@@ -52,6 +52,9 @@ const fn merge_network<const M: usize>(n: usize) -> ([(u8, u8); M], usize) {
 /// The sorting network of [`small_median`] (132 pairs for 24 inputs).
 const NETWORK: ([(u8, u8); 160], usize) = merge_network::<160>(SMALL);
 
+// [`small_median`] unrolls the first 144 pairs
+const _: () = assert!(NETWORK.1 <= 144);
+
 /// The bits of `x` as an integer that orders as [`f64::total_cmp`] does.
 #[inline]
 fn total_key(x: f64) -> i64 {
@@ -67,8 +70,8 @@ fn from_total_key(k: i64) -> f64 {
 
 /// [`median`] of at most [`SMALL`] values, the same number (up to the sign of a zero, which
 /// [`median`] leaves to `f64::max`), by a sorting network: the same compare-exchanges
-/// whatever the values, without the mispredicted branches of a selection (half its time
-/// on 20 values). More values go to [`median`].
+/// whatever the values, without the mispredicted branches of a selection (a quarter of
+/// its time on 20 values). More values go to [`median`].
 pub(crate) fn small_median(v: &mut [f64]) -> f64 {
     let n = v.len();
     if n == 0 || n > SMALL {
@@ -78,12 +81,45 @@ pub(crate) fn small_median(v: &mut [f64]) -> f64 {
     for (d, x) in k.iter_mut().zip(v.iter()) {
         *d = total_key(*x);
     }
-    let (pairs, count) = &NETWORK;
-    for &(a, b) in &pairs[..*count] {
-        let (x, y) = (k[a as usize], k[b as usize]);
-        k[a as usize] = x.min(y);
-        k[b as usize] = x.max(y);
+    // the network unrolled: every pair's indices are constants, so that the values stay in
+    // registers (a loop over the table goes through memory at every step: twice the time)
+    macro_rules! exchange {
+        ($i:expr) => {
+            if $i < NETWORK.1 {
+                let (a, b) = NETWORK.0[$i];
+                let (x, y) = (k[a as usize], k[b as usize]);
+                k[a as usize] = x.min(y);
+                k[b as usize] = x.max(y);
+            }
+        };
     }
+    macro_rules! times4 {
+        ($i:expr) => {
+            exchange!($i);
+            exchange!($i + 1);
+            exchange!($i + 2);
+            exchange!($i + 3);
+        };
+    }
+    macro_rules! times16 {
+        ($i:expr) => {
+            times4!($i);
+            times4!($i + 4);
+            times4!($i + 8);
+            times4!($i + 12);
+        };
+    }
+    macro_rules! times64 {
+        ($i:expr) => {
+            times16!($i);
+            times16!($i + 16);
+            times16!($i + 32);
+            times16!($i + 48);
+        };
+    }
+    times64!(0);
+    times64!(64);
+    times16!(128);
     let mid = n / 2;
     if n % 2 == 1 {
         from_total_key(k[mid])
