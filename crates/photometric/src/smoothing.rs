@@ -259,30 +259,30 @@ fn local_linear_many(
     tasks.extend((0..maps.len()).flat_map(|j| (0..3).map(move |m| Src::Values(j, m))));
     // (one loop per kind of moment: the choice is made once per row, not per pixel)
     let moment = |src: Src| -> Vec<f64> {
-        let mut out = vec![0.0f64; n];
+        // (filled row by row as it is computed: no zeroing of the full-size map first)
+        let mut out = Vec::with_capacity(n);
         let (wv, val, m) = match src {
             Src::Weights(k, m, _) => (&groups[k].0, None, m),
             Src::Values(j, m) => (&groups[group_of[j]].0, Some(maps[j].0), m),
         };
-        for (y, row) in out.chunks_mut(w.max(1)).enumerate() {
-            let yv = yrow[y];
-            let span = y * w..y * w + row.len();
-            let (a, xs) = (&wv[span.clone()], &xcol[..row.len()]);
-            let ax = row.iter_mut().zip(a).zip(xs);
+        for (y, &yv) in yrow.iter().enumerate() {
+            let span = y * w..(y + 1) * w;
+            let a = &wv[span.clone()];
+            let ax = a.iter().zip(&xcol);
             match (val, m) {
-                (None, 0) => row.copy_from_slice(a),
-                (None, 1) => ax.for_each(|((o, a), xv)| *o = a * xv),
-                (None, 2) => row.iter_mut().zip(a).for_each(|(o, a)| *o = a * yv),
-                (None, 3) => ax.for_each(|((o, a), xv)| *o = a * xv * xv),
-                (None, 4) => ax.for_each(|((o, a), xv)| *o = a * xv * yv),
-                (None, _) => row.iter_mut().zip(a).for_each(|(o, a)| *o = a * yv * yv),
+                (None, 0) => out.extend_from_slice(a),
+                (None, 1) => out.extend(ax.map(|(a, xv)| a * xv)),
+                (None, 2) => out.extend(a.iter().map(|a| a * yv)),
+                (None, 3) => out.extend(ax.map(|(a, xv)| a * xv * xv)),
+                (None, 4) => out.extend(ax.map(|(a, xv)| a * xv * yv)),
+                (None, _) => out.extend(a.iter().map(|a| a * yv * yv)),
                 (Some(v), m) => {
                     let finite = |v: &f64| if v.is_finite() { *v } else { 0.0 };
                     let vals = ax.zip(&v[span]);
                     match m {
-                        0 => vals.for_each(|(((o, a), _), v)| *o = a * finite(v)),
-                        1 => vals.for_each(|(((o, a), xv), v)| *o = a * finite(v) * xv),
-                        _ => vals.for_each(|(((o, a), _), v)| *o = a * finite(v) * yv),
+                        0 => out.extend(vals.map(|((a, _), v)| a * finite(v))),
+                        1 => out.extend(vals.map(|((a, xv), v)| a * finite(v) * xv)),
+                        _ => out.extend(vals.map(|((a, _), v)| a * finite(v) * yv)),
                     }
                 }
             }
