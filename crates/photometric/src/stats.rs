@@ -133,8 +133,8 @@ mod tests {
     use super::{median, small_median, NETWORK, SMALL};
 
     /// The network sorts 0-1 inputs of its size (every 97th of the 2^24: a network that
-    /// sorts all of them sorts every input), and the small median is the median at every length, with ties, zeros
-    /// of both signs, infinities and values of every magnitude.
+    /// sorts all of them sorts every input), and the small median is the median at every
+    /// length, with ties, zeros of both signs, infinities and values of every magnitude.
     #[test]
     fn the_network_sorts_and_the_small_median_is_the_median() {
         let (pairs, count) = &NETWORK;
