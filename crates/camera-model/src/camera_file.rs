@@ -515,8 +515,11 @@ impl FromStr for CameraFile {
 }
 
 /// The model names DSO recognises, with their number of parameters after `fx fy cx cy`.
-const MODELS: [(&str, usize); 5] = [
+const MODELS: [(&str, usize); 8] = [
     ("KannalaBrandt", 4),
+    ("DoubleSphere", 2),
+    ("EUCM", 2),
+    ("Omni", 5),
     ("RadTan", 4),
     ("EquiDistant", 4),
     ("FOV", 1),
@@ -576,6 +579,9 @@ fn parse_model_line(
             "Pinhole" => "5 numbers `fx fy cx cy 0` (DSO refuses 4)",
             "RadTan" => "8 numbers `fx fy cx cy k1 k2 p1 p2`",
             "EquiDistant" => "8 numbers `fx fy cx cy k1 k2 k3 k4`",
+            "DoubleSphere" => "6 numbers `fx fy cx cy xi alpha`",
+            "EUCM" => "6 numbers `fx fy cx cy alpha beta`",
+            "Omni" => "9 numbers `fx fy cx cy xi k1 k2 p1 p2`",
             _ => "8 numbers `fx fy cx cy k0 k1 k2 k3`",
         };
         return Err(CameraError::Parse {
@@ -660,10 +666,33 @@ fn parse_model_line(
             k,
             coeffs: [p(4), p(5), p(6), p(7)],
         },
+        "DoubleSphere" => CameraModel::DoubleSphere {
+            k,
+            xi: p(4),
+            alpha: p(5),
+        },
+        "EUCM" => CameraModel::Eucm {
+            k,
+            alpha: p(4),
+            beta: p(5),
+        },
+        "Omni" => CameraModel::Unified {
+            k,
+            xi: p(4),
+            coeffs: [p(5), p(6), p(7), p(8)],
+        },
         _ => CameraModel::KannalaBrandt {
             k,
             coeffs: [p(4), p(5), p(6), p(7)],
         },
     };
+    if let Some(message) = model.parameter_problem() {
+        return Err(CameraError::InvalidValue { line, message });
+    }
+    if matches!(name, "DoubleSphere" | "EUCM" | "Omni") {
+        notes.push(format!(
+            "line {line}: `{name}` is monovo's extension of camera.txt; DSO cannot read it"
+        ));
+    }
     Ok(model)
 }

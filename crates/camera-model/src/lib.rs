@@ -2,10 +2,14 @@
 //! rectification of fisheye frames to a pinhole camera of any field of view and size.
 //!
 //! * [`CameraModel`]: FOV (ATAN, the benchmark's model, with its closed-form inverse),
-//!   Pinhole, RadTan, EquiDistant and KannalaBrandt; [`CameraModel::project`] and
+//!   Pinhole, RadTan, EquiDistant and KannalaBrandt, and the wide-angle Double Sphere, EUCM and
+//!   unified (omni) models with closed-form inverses; [`CameraModel::project`] and
 //!   [`CameraModel::unproject`].
 //! * [`CameraFile`]: parse and write camera.txt (DSO prefixes and legacy lines, relative and
 //!   absolute intrinsics, output `crop`, `full`, `none` or an explicit pinhole).
+//! * [`CalibrationFile`]: the calibration files of the field's tools (Kalibr camchain.yaml,
+//!   EuRoC sensor.yaml, Basalt calibration.json, KITTI calib.txt, and camera.txt), the format
+//!   told from the content.
 //! * [`output_intrinsics`] and [`RectifyMap`]: the output pinhole and a precomputed bilinear
 //!   map that remaps `u8` or `f32` [`Image`]s.
 //!
@@ -35,13 +39,18 @@
 //! ```
 #![deny(missing_docs)]
 
+mod calibration;
 mod camera_file;
 mod error;
 mod fixed;
 mod image;
 mod model;
 mod rectify;
+mod sphere;
 
+pub use calibration::{
+    invert_rigid, CalibratedCamera, CalibrationFile, CalibrationFormat, Transform,
+};
 pub use camera_file::{
     intrinsics_from_file_values, intrinsics_to_file_values, CameraFile, ImageSize, OutputMode,
 };

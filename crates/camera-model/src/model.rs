@@ -3,6 +3,8 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt;
 
+use crate::sphere;
+
 /// Pinhole intrinsics in pixels.
 ///
 /// Pixel centres sit at integer coordinates: the centre of the top-left pixel is `(0, 0)`,
@@ -85,6 +87,37 @@ pub enum CameraModel {
         /// Polynomial coefficients `[k0, k1, k2, k3]`.
         coeffs: [f64; 4],
     },
+    /// Double Sphere (Usenko, Demmel, Cremers 2018; Basalt's `ds`, Kalibr's `ds`): two unit
+    /// spheres `xi` apart, then the unified projection with `alpha`; closed-form inverse.
+    DoubleSphere {
+        /// Pinhole part.
+        k: Intrinsics,
+        /// Distance between the two sphere centres.
+        xi: f64,
+        /// Unified-projection parameter in `[0, 1]`.
+        alpha: f64,
+    },
+    /// Extended Unified Camera Model (Khomutenko et al. 2016, as in Usenko et al. 2018;
+    /// Basalt's `eucm`, Kalibr's `eucm`): the unified projection on an ellipsoid `beta`.
+    Eucm {
+        /// Pinhole part.
+        k: Intrinsics,
+        /// Unified-projection parameter in `[0, 1]`.
+        alpha: f64,
+        /// Ellipsoid parameter, positive.
+        beta: f64,
+    },
+    /// The unified model of Mei and Rives (Kalibr's `omni`, OpenCV's `omnidir`): the unit
+    /// sphere seen from `xi` behind its centre, then radial-tangential distortion of the
+    /// image-plane coordinates (all zero for Kalibr's `omni-none` and Basalt's `ucm`).
+    Unified {
+        /// Pinhole part (Kalibr's `gamma` focal lengths).
+        k: Intrinsics,
+        /// Mirror parameter, `>= 0` (0 is a pinhole).
+        xi: f64,
+        /// Radial-tangential coefficients `[k1, k2, p1, p2]`.
+        coeffs: [f64; 4],
+    },
 }
 
 impl fmt::Display for CameraModel {
@@ -113,6 +146,15 @@ impl fmt::Display for CameraModel {
                 " k1={:.6} k2={:.6} k3={:.6} k4={:.6}",
                 c[0], c[1], c[2], c[3]
             ),
+            CameraModel::DoubleSphere { xi, alpha, .. } => {
+                write!(f, " xi={xi:.6} alpha={alpha:.6}")
+            }
+            CameraModel::Eucm { alpha, beta, .. } => write!(f, " alpha={alpha:.6} beta={beta:.6}"),
+            CameraModel::Unified { xi, coeffs: c, .. } => write!(
+                f,
+                " xi={xi:.6} k1={:.6} k2={:.6} p1={:.6} p2={:.6}",
+                c[0], c[1], c[2], c[3]
+            ),
         }
     }
 }
@@ -122,7 +164,7 @@ const MAX_FISHEYE_THETA: f64 = PI - 1e-6;
 
 impl CameraModel {
     /// The model's name as written in camera.txt (`Pinhole`, `FOV`, `RadTan`, `EquiDistant`,
-    /// `KannalaBrandt`).
+    /// `KannalaBrandt`; monovo's own `DoubleSphere`, `EUCM` and `Omni`, which DSO cannot read).
     pub fn name(&self) -> &'static str {
         match self {
             CameraModel::Pinhole(_) => "Pinhole",
@@ -130,6 +172,9 @@ impl CameraModel {
             CameraModel::RadTan { .. } => "RadTan",
             CameraModel::EquiDistant { .. } => "EquiDistant",
             CameraModel::KannalaBrandt { .. } => "KannalaBrandt",
+            CameraModel::DoubleSphere { .. } => "DoubleSphere",
+            CameraModel::Eucm { .. } => "EUCM",
+            CameraModel::Unified { .. } => "Omni",
         }
     }
 
@@ -140,7 +185,10 @@ impl CameraModel {
             | CameraModel::Fov { k, .. }
             | CameraModel::RadTan { k, .. }
             | CameraModel::EquiDistant { k, .. }
-            | CameraModel::KannalaBrandt { k, .. } => *k,
+            | CameraModel::KannalaBrandt { k, .. }
+            | CameraModel::DoubleSphere { k, .. }
+            | CameraModel::Eucm { k, .. }
+            | CameraModel::Unified { k, .. } => *k,
         }
     }
 
@@ -152,6 +200,32 @@ impl CameraModel {
             CameraModel::RadTan { coeffs, .. }
             | CameraModel::EquiDistant { coeffs, .. }
             | CameraModel::KannalaBrandt { coeffs, .. } => coeffs.to_vec(),
+            CameraModel::DoubleSphere { xi, alpha, .. } => vec![*xi, *alpha],
+            CameraModel::Eucm { alpha, beta, .. } => vec![*alpha, *beta],
+            CameraModel::Unified { xi, coeffs, .. } => {
+                vec![*xi, coeffs[0], coeffs[1], coeffs[2], coeffs[3]]
+            }
+        }
+    }
+
+    /// Why the model's parameters are unusable (non-finite or non-positive focal lengths, or a
+    /// spherical model's parameters outside their range), or `None` when they are fine.
+    pub fn parameter_problem(&self) -> Option<String> {
+        let k = self.intrinsics();
+        if ![k.fx, k.fy, k.cx, k.cy].iter().all(|v| v.is_finite()) || k.fx <= 0.0 || k.fy <= 0.0 {
+            return Some(format!(
+                "focal lengths must be positive and all intrinsics finite, got fx={} fy={} cx={} cy={}",
+                k.fx, k.fy, k.cx, k.cy
+            ));
+        }
+        if let Some(v) = self.distortion().iter().find(|v| !v.is_finite()) {
+            return Some(format!("`{v}` is not a finite number"));
+        }
+        match self {
+            CameraModel::DoubleSphere { xi, alpha, .. } => sphere::check_ds(*xi, *alpha),
+            CameraModel::Eucm { alpha, beta, .. } => sphere::check_eucm(*alpha, *beta),
+            CameraModel::Unified { xi, .. } => sphere::check_unified(*xi),
+            _ => None,
         }
     }
 
@@ -191,6 +265,21 @@ impl CameraModel {
                 };
                 Some(k.normalized_to_pixel(m))
             }
+            CameraModel::DoubleSphere { k, xi, alpha } => {
+                Some(k.normalized_to_pixel(sphere::ds_project(*xi, *alpha, [x, y, z])?))
+            }
+            CameraModel::Eucm { k, alpha, beta } => {
+                Some(k.normalized_to_pixel(sphere::eucm_project(*alpha, *beta, [x, y, z])?))
+            }
+            CameraModel::Unified { k, xi, coeffs } => {
+                let m = sphere::unified_project(*xi, [x, y, z])?;
+                let d = if coeffs.iter().all(|c| *c == 0.0) {
+                    m
+                } else {
+                    radtan_distort(coeffs, m).0
+                };
+                Some(k.normalized_to_pixel(d))
+            }
             _ => {
                 if z <= 0.0 || !z.is_finite() {
                     return None;
@@ -227,6 +316,12 @@ impl CameraModel {
                 };
                 Some([n[0] * s, n[1] * s])
             }
+            CameraModel::DoubleSphere { .. }
+            | CameraModel::Eucm { .. }
+            | CameraModel::Unified { .. } => {
+                let p = self.project([n[0], n[1], 1.0])?;
+                Some(self.intrinsics().pixel_to_normalized(p))
+            }
         }
     }
 
@@ -244,6 +339,19 @@ impl CameraModel {
                 let theta = (n[0] * n[0] + n[1] * n[1]).sqrt().atan();
                 fisheye_poly_derivative(coeffs, theta) > 0.0
                     && (theta == 0.0 || fisheye_poly(coeffs, theta) > 0.0)
+            }
+            CameraModel::DoubleSphere { .. } | CameraModel::Eucm { .. } => {
+                self.project([n[0], n[1], 1.0]).is_some()
+            }
+            CameraModel::Unified { xi, coeffs, .. } => {
+                match sphere::unified_project(*xi, [n[0], n[1], 1.0]) {
+                    Some(m) if coeffs.iter().any(|c| *c != 0.0) => {
+                        let (_, j) = radtan_distort(coeffs, m);
+                        j[0] > 0.0 && j[3] > 0.0 && j[0] * j[3] - j[1] * j[2] > 0.0
+                    }
+                    Some(_) => true,
+                    None => false,
+                }
             }
         }
     }
@@ -277,6 +385,16 @@ impl CameraModel {
                     let s = theta.sin() / theta_d;
                     [m[0] * s, m[1] * s, theta.cos()]
                 }
+            }
+            CameraModel::DoubleSphere { xi, alpha, .. } => sphere::ds_unproject(*xi, *alpha, m)?,
+            CameraModel::Eucm { alpha, beta, .. } => sphere::eucm_unproject(*alpha, *beta, m)?,
+            CameraModel::Unified { xi, coeffs, .. } => {
+                let u = if coeffs.iter().all(|c| *c == 0.0) {
+                    m
+                } else {
+                    radtan_undistort(coeffs, m)?
+                };
+                sphere::unified_unproject(*xi, u)?
             }
         };
         let norm = (ray[0] * ray[0] + ray[1] * ray[1] + ray[2] * ray[2]).sqrt();
@@ -329,6 +447,21 @@ impl CameraModel {
             },
             CameraModel::KannalaBrandt { coeffs, .. } => CameraModel::KannalaBrandt {
                 k: k2,
+                coeffs: *coeffs,
+            },
+            CameraModel::DoubleSphere { xi, alpha, .. } => CameraModel::DoubleSphere {
+                k: k2,
+                xi: *xi,
+                alpha: *alpha,
+            },
+            CameraModel::Eucm { alpha, beta, .. } => CameraModel::Eucm {
+                k: k2,
+                alpha: *alpha,
+                beta: *beta,
+            },
+            CameraModel::Unified { xi, coeffs, .. } => CameraModel::Unified {
+                k: k2,
+                xi: *xi,
                 coeffs: *coeffs,
             },
         }

@@ -60,8 +60,58 @@ pub fn all_models() -> Vec<(CameraModel, ImageSize)> {
             },
             ImageSize::new(640, 480),
         ),
+        (
+            // Basalt's TUM-VI cam0 (data/tumvi_512_ds_calib.json)
+            CameraModel::DoubleSphere {
+                k: Intrinsics {
+                    fx: 158.28600034966977,
+                    fy: 158.2743455478755,
+                    cx: 254.96116578191653,
+                    cy: 256.8894394501779,
+                },
+                xi: -0.17213086034353243,
+                alpha: 0.5931177593944744,
+            },
+            ImageSize::new(512, 512),
+        ),
+        (
+            // Basalt's EuRoC cam0 (data/euroc_eucm_calib.json)
+            CameraModel::Eucm {
+                k: Intrinsics {
+                    fx: 460.76484651566468,
+                    fy: 459.4051018049483,
+                    cx: 365.8937161309615,
+                    cy: 249.33499869752445,
+                },
+                alpha: 0.5903365915227143,
+                beta: 1.127468196965374,
+            },
+            ImageSize::new(752, 480),
+        ),
+        (
+            // Kalibr's wiki example omni-radtan cam0 (kalibr-wiki Yaml-formats.md)
+            CameraModel::Unified {
+                k: Intrinsics {
+                    fx: 770.7765589675081,
+                    fy: 770.5559465743702,
+                    cx: 362.1635863019238,
+                    cy: 247.88842203540298,
+                },
+                xi: 0.671111239995445,
+                coeffs: [
+                    -0.3524047797899213,
+                    0.16207450943423096,
+                    0.00036919741711283124,
+                    0.000988523976270618,
+                ],
+            },
+            ImageSize::new(752, 480),
+        ),
     ]
 }
+
+/// The number of models in [`all_models`].
+pub const MODELS: usize = 8;
 
 /// A pixel grid over the whole image, borders included.
 pub fn pixel_grid(size: ImageSize, step: usize) -> Vec<[f64; 2]> {

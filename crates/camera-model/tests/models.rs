@@ -1,5 +1,5 @@
 //! Projection / unprojection properties of every model.
-use crate::common::{all_models, pixel_grid};
+use crate::common::{all_models, pixel_grid, MODELS};
 use camera_model::{CameraModel, Intrinsics};
 use proptest::prelude::*;
 
@@ -85,7 +85,7 @@ proptest! {
     /// back onto its own ray (angle below 1e-9 rad).
     #[test]
     fn project_then_unproject_keeps_the_ray(
-        which in 0usize..5,
+        which in 0usize..MODELS,
         theta in 0.0f64..1.0,
         phi in 0.0f64..std::f64::consts::TAU,
         depth in 0.1f64..100.0,
@@ -103,7 +103,7 @@ proptest! {
 
     /// Pixels anywhere in the image survive the round trip (1e-6 px).
     #[test]
-    fn random_pixels_round_trip(which in 0usize..5, fx in 0.0f64..1.0, fy in 0.0f64..1.0) {
+    fn random_pixels_round_trip(which in 0usize..MODELS, fx in 0.0f64..1.0, fy in 0.0f64..1.0) {
         let (model, size) = all_models().swap_remove(which);
         let p = [fx * (size.width - 1) as f64, fy * (size.height - 1) as f64];
         let back = model.project(model.unproject(p).unwrap()).unwrap();
