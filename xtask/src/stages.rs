@@ -459,6 +459,7 @@ fn written_pipeline(
             id: format!("{i:05}"),
             timestamp: i as f64 * 0.05,
             exposure_ms: Some(seq.exposures_ms[i % seq.exposures_ms.len()]),
+            timestamp_ns: None,
         })
         .collect();
     std::fs::write(input.join("times.txt"), dataset_io::times_text(&rows))?;

@@ -25,6 +25,8 @@ pub enum CalibrationFormat {
     BasaltJson,
     /// KITTI odometry `calib.txt` (`P0:` ... 3x4 projection matrices, already rectified).
     KittiCalib,
+    /// ETH3D SLAM's `calibration.txt`: one line `fx fy cx cy` (rectified pinhole).
+    Eth3d,
 }
 
 impl fmt::Display for CalibrationFormat {
@@ -35,6 +37,7 @@ impl fmt::Display for CalibrationFormat {
             CalibrationFormat::EurocSensor => "EuRoC sensor.yaml",
             CalibrationFormat::BasaltJson => "Basalt calibration.json",
             CalibrationFormat::KittiCalib => "KITTI calib.txt",
+            CalibrationFormat::Eth3d => "ETH3D calibration.txt",
         })
     }
 }
@@ -91,9 +94,10 @@ fn line_of(text: &str, key: &str, from: usize) -> usize {
 impl CalibrationFile {
     /// Parses a calibration file of any supported format, told from its content: JSON with
     /// `value0` is Basalt's; lines `P0:` are KITTI's; YAML with `cam0:` is Kalibr's, with
-    /// `intrinsics:` at the top EuRoC's sensor.yaml; anything else is read as camera.txt.
-    pub fn parse(text: &str) -> Result<CalibrationFile, CameraError> {
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    /// `intrinsics:` at the top EuRoC's sensor.yaml; one line of 4 numbers ETH3D's; anything
+    /// else is read as camera.txt.
+    pub fn parse(original: &str) -> Result<CalibrationFile, CameraError> {
+        let text = original.strip_prefix('\u{feff}').unwrap_or(original);
         let t = text.trim_start();
         if t.starts_with('{') {
             return parse_basalt(text);
@@ -108,7 +112,38 @@ impl CalibrationFile {
         if top_keys("intrinsics:") && (top_keys("camera_model:") || top_keys("T_BS:")) {
             return parse_euroc(text);
         }
-        let file = CameraFile::parse(text)?;
+        let content: Vec<(usize, &str)> = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+            .collect();
+        if let [(i, only)] = content.as_slice() {
+            let nums: Option<Vec<f64>> = only
+                .split_whitespace()
+                .map(|v| v.parse::<f64>().ok())
+                .collect();
+            if let Some(n) = nums.filter(|n| n.len() == 4) {
+                let model = CameraModel::Pinhole(intrinsics(&n));
+                if let Some(message) = model.parameter_problem() {
+                    return Err(CameraError::InvalidValue {
+                        line: i + 1,
+                        message,
+                    });
+                }
+                return Ok(CalibrationFile {
+                    format: CalibrationFormat::Eth3d,
+                    cameras: vec![CalibratedCamera {
+                        name: "camera".into(),
+                        model,
+                        size: None,
+                        camera_from_imu: None,
+                    }],
+                    camera_txt: None,
+                });
+            }
+        }
+        // camera.txt notes a byte-order mark itself
+        let file = CameraFile::parse(original)?;
         Ok(CalibrationFile {
             format: CalibrationFormat::CameraTxt,
             cameras: vec![CalibratedCamera {

@@ -4,6 +4,7 @@
 mod calib;
 mod camera;
 mod common;
+mod datasets;
 mod eval;
 mod experiment;
 mod exposure;

@@ -28,6 +28,7 @@
 
 mod atomic;
 mod error;
+mod layouts;
 mod ordered;
 mod outdir;
 mod png;
@@ -42,6 +43,7 @@ mod zipimages;
 
 pub use atomic::{check_output_file, read_text, scratch_file, write_atomic, write_atomic_with};
 pub use error::DatasetError;
+pub use layouts::Layout;
 pub use outdir::OutputDir;
 pub use png::{
     encode_jpeg_gray, encode_png_u16, encode_png_u8, read_png_text, write_png_u16,
@@ -56,6 +58,6 @@ pub use temporaries::{
     in_flight as temporaries_in_flight, remove_all_and_block as remove_temporaries_and_block,
     remove_stale as remove_stale_temporaries, temp_sibling,
 };
-pub use times::{parse_times, times_text, TimeRow, Times};
+pub use times::{ns_to_seconds_text, parse_times, seconds_to_ns, times_text, TimeRow, Times};
 pub use writer::{write_images_zip, SequenceWriter};
 pub use zipimages::ImagesZip;

@@ -7,8 +7,9 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use camera_model::{CameraFile, Image, ImageSize};
+use camera_model::{CalibrationFile, CalibrationFormat, CameraFile, Image, ImageSize, Transform};
 
+use crate::layouts::{resolve, Layout, Listed, Resolved};
 use crate::ordered::for_each_ordered;
 use crate::times::{parse_times, Times};
 use crate::zipimages::is_image_name;
@@ -39,6 +40,8 @@ pub struct Frame {
     pub timestamp: f64,
     /// Exposure in ms, when known.
     pub exposure_ms: Option<f64>,
+    /// Timestamp in integer nanoseconds, when the dataset gives it exactly.
+    pub timestamp_ns: Option<i64>,
 }
 
 /// A grey image with the sample type of its file: 8 bits (JPEG, 8-bit PNG/PGM) or 16 bits
@@ -82,12 +85,22 @@ pub struct NativeFrame {
     pub timestamp: f64,
     /// Exposure in ms, when known.
     pub exposure_ms: Option<f64>,
+    /// Timestamp in integer nanoseconds, when the dataset gives it exactly.
+    pub timestamp_ns: Option<i64>,
 }
 
 /// An opened, validated sequence.
 #[derive(Debug)]
 pub struct Sequence {
     dir: PathBuf,
+    layout: Layout,
+    camera_path: Option<PathBuf>,
+    camera_from_imu: Option<Transform>,
+    /// The dataset's own ground truth beside the images (EuRoC's state csv, TUM-VI's mocap
+    /// csv, 4Seasons' GNSSPoses.txt, KITTI's poses, TUM RGB-D's groundtruth.txt), if found.
+    pub dataset_ground_truth: Option<PathBuf>,
+    /// Warnings about the layout (frames without exposure, rows without image, ...).
+    pub layout_warnings: Vec<String>,
     source: Source,
     names: Vec<String>,
     times: Times,
@@ -350,10 +363,107 @@ fn optional(dir: &Path, name: &str) -> Option<PathBuf> {
 }
 
 impl Sequence {
-    /// Opens and validates a sequence folder: the images (`images.zip` preferred, else
-    /// `images/`), times.txt (one row per image, increasing timestamps), camera.txt when
-    /// present (its input size must match the images).
+    /// Opens and validates a sequence folder of any layout (see [`Layout`]) with its first
+    /// camera; see [`Sequence::open_camera`].
     pub fn open(dir: &Path) -> Result<Sequence, DatasetError> {
+        Sequence::open_camera(dir, 0)
+    }
+
+    /// Opens and validates a sequence folder of any layout, camera `cam` where the dataset
+    /// has several (`--cam N`): the monovo/DSO folder (`images.zip` preferred, else
+    /// `images/`, times.txt with one row per image and increasing timestamps, camera.txt whose
+    /// input size must match the images), TUM-VI, EuRoC/ASL, 4Seasons, KITTI or TUM RGB-D /
+    /// ETH3D, each with its own calibration file.
+    pub fn open_camera(dir: &Path, cam: usize) -> Result<Sequence, DatasetError> {
+        if !dir.exists() {
+            return Err(DatasetError::invalid(dir, "does not exist"));
+        }
+        if !dir.is_dir() {
+            return Err(DatasetError::invalid(
+                dir,
+                "is a file, not a sequence folder (images.zip or images/, times.txt, ...)",
+            ));
+        }
+        match resolve(dir, cam)? {
+            Resolved::Monovo {
+                dir: sub,
+                layout,
+                ground_truth,
+                calibration,
+            } => {
+                let mut seq = Sequence::open_monovo(&sub)?;
+                seq.layout = layout;
+                seq.dataset_ground_truth = ground_truth;
+                if let Some(p) = calibration {
+                    // TUM-VI's dso/camchain.yaml: the IMU-to-camera transform
+                    let cal = CalibrationFile::parse(&read_text(&p)?)
+                        .map_err(|e| DatasetError::invalid(&p, e.to_string()))?;
+                    seq.camera_from_imu = cal.cameras.get(cam).and_then(|c| c.camera_from_imu);
+                }
+                Ok(seq)
+            }
+            Resolved::Listed(listed) => Sequence::open_listed(dir, *listed, cam),
+        }
+    }
+
+    /// A listed layout: the images, their rows, and the calibration file read for `cam`.
+    fn open_listed(dir: &Path, l: Listed, cam: usize) -> Result<Sequence, DatasetError> {
+        let mut seq = Sequence {
+            dir: dir.to_path_buf(),
+            layout: l.layout,
+            camera_path: None,
+            camera_from_imu: None,
+            dataset_ground_truth: l.ground_truth,
+            layout_warnings: l.warnings,
+            source: Source::Folder { files: l.files },
+            names: l.names,
+            times: l.times,
+            times_path: l.times_path,
+            camera: None,
+            size: ImageSize::new(0, 0),
+            bits: 8,
+            jpeg: false,
+            pcalib_path: l.pcalib,
+            vignette_path: l.vignette,
+            ground_truth_path: None,
+        };
+        let first = seq.raw(0)?;
+        seq.jpeg = is_jpeg(&first);
+        let first = decode_gray(&first).map_err(|m| DatasetError::invalid(seq.label(0), m))?;
+        let (fw, fh) = first.size();
+        seq.size = ImageSize::new(fw, fh);
+        seq.bits = first.bits();
+        if let Some(p) = l.calibration {
+            let cal = CalibrationFile::parse(&read_text(&p)?)
+                .map_err(|e| DatasetError::invalid(&p, e.to_string()))?;
+            // files of one camera (sensor.yaml, camera.txt, ETH3D's) serve every --cam
+            let index = match cal.format {
+                CalibrationFormat::EurocSensor
+                | CalibrationFormat::CameraTxt
+                | CalibrationFormat::Eth3d => 0,
+                _ => cam,
+            };
+            let file = cal
+                .camera_file(index, Some(seq.size))
+                .map_err(|e| DatasetError::invalid(&p, e.to_string()))?;
+            if file.input_size != seq.size {
+                return Err(DatasetError::invalid(
+                    &p,
+                    format!(
+                        "the camera is {} but the images are {} ({})",
+                        file.input_size, seq.size, seq.names[0]
+                    ),
+                ));
+            }
+            seq.camera_from_imu = cal.cameras.get(index).and_then(|c| c.camera_from_imu);
+            seq.camera = Some(file);
+            seq.camera_path = Some(p);
+        }
+        Ok(seq)
+    }
+
+    /// The monovo/DSO folder.
+    fn open_monovo(dir: &Path) -> Result<Sequence, DatasetError> {
         if !dir.exists() {
             return Err(DatasetError::invalid(dir, "does not exist"));
         }
@@ -430,6 +540,11 @@ impl Sequence {
         }
         let mut seq = Sequence {
             dir: dir.to_path_buf(),
+            layout: Layout::Monovo,
+            camera_path: None,
+            camera_from_imu: None,
+            dataset_ground_truth: None,
+            layout_warnings: Vec::new(),
             source,
             names,
             times,
@@ -462,13 +577,34 @@ impl Sequence {
                 ));
             }
             seq.camera = Some(cam);
+            seq.camera_path = Some(camera_path);
         }
         Ok(seq)
     }
 
-    /// The sequence folder.
+    /// The sequence folder (for TUM-VI, its `dso/camN` folder).
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// The layout the folder was read as.
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+
+    /// The calibration file the camera was read from (camera.txt, sensor.yaml, ...).
+    pub fn camera_path(&self) -> Option<&Path> {
+        self.camera_path.as_deref()
+    }
+
+    /// The transform from the IMU (body) frame to the camera, when the calibration gives it.
+    pub fn camera_from_imu(&self) -> Option<&Transform> {
+        self.camera_from_imu.as_ref()
+    }
+
+    /// The timestamps in integer nanoseconds, when the dataset gives every one exactly.
+    pub fn timestamps_ns(&self) -> Option<Vec<i64>> {
+        self.times.timestamps_ns()
     }
 
     /// Number of images.
@@ -632,6 +768,7 @@ impl Sequence {
             image,
             timestamp: row.timestamp,
             exposure_ms: row.exposure_ms,
+            timestamp_ns: row.timestamp_ns,
         }
     }
 
@@ -698,6 +835,7 @@ impl Sequence {
             image,
             timestamp: row.timestamp,
             exposure_ms: row.exposure_ms,
+            timestamp_ns: row.timestamp_ns,
         })
     }
 

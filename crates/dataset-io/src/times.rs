@@ -17,6 +17,64 @@ pub struct TimeRow {
     pub timestamp: f64,
     /// Exposure time in milliseconds, `None` when the file has no third column.
     pub exposure_ms: Option<f64>,
+    /// The timestamp in integer nanoseconds, exact where the file gives it (an id of 16 to 19
+    /// digits that agrees with the timestamp, as TUM-VI's and 4Seasons' times.txt have, or a
+    /// timestamp with at most 9 decimals); an `f64` cannot hold 1.6e18 ns.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestamp_ns: Option<i64>,
+}
+
+/// The exact integer nanoseconds of a decimal number of seconds (`1520530308.199447626`;
+/// more than 9 decimals are rounded half up; an exponent is read through `f64`). `None` for
+/// anything else, or beyond the range of `i64`.
+pub fn seconds_to_ns(text: &str) -> Option<i64> {
+    let t = text.trim();
+    if t.contains(['e', 'E']) {
+        let v = t.parse::<f64>().ok()?;
+        let ns = (v * 1e9).round();
+        return (ns.is_finite() && ns.abs() < 9.2e18).then_some(ns as i64);
+    }
+    let (neg, t) = match t.strip_prefix('-') {
+        Some(r) => (true, r),
+        None => (false, t.strip_prefix('+').unwrap_or(t)),
+    };
+    let (int, frac) = t.split_once('.').unwrap_or((t, ""));
+    if int.is_empty() && frac.is_empty()
+        || !int.bytes().all(|b| b.is_ascii_digit())
+        || !frac.bytes().all(|b| b.is_ascii_digit())
+    {
+        return None;
+    }
+    let whole: i64 = if int.is_empty() { 0 } else { int.parse().ok()? };
+    let mut digits: Vec<u8> = frac.bytes().map(|b| b - b'0').collect();
+    let round_up = digits.len() > 9 && digits[9] >= 5;
+    digits.resize(9, 0);
+    let mut nanos = digits.iter().fold(0i64, |a, d| a * 10 + *d as i64);
+    if round_up {
+        nanos += 1;
+    }
+    let v = whole.checked_mul(1_000_000_000)?.checked_add(nanos)?;
+    Some(if neg { -v } else { v })
+}
+
+/// The nanoseconds of a row: its id when that is an integer of 16 to 19 digits within 1 ms of
+/// the timestamp (TUM-VI, 4Seasons), else the timestamp's text read exactly.
+fn row_ns(id: &str, t_text: &str, timestamp: f64) -> Option<i64> {
+    if (16..=19).contains(&id.len()) && id.bytes().all(|b| b.is_ascii_digit()) {
+        if let Ok(ns) = id.parse::<i64>() {
+            if (ns as f64 * 1e-9 - timestamp).abs() < 1e-3 {
+                return Some(ns);
+            }
+        }
+    }
+    seconds_to_ns(t_text)
+}
+
+/// Formats integer nanoseconds as exact decimal seconds (`1520530308.199447626`).
+pub fn ns_to_seconds_text(ns: i64) -> String {
+    let sign = if ns < 0 { "-" } else { "" };
+    let a = ns.unsigned_abs();
+    format!("{sign}{}.{:09}", a / 1_000_000_000, a % 1_000_000_000)
 }
 
 /// A parsed times.txt, with the notes about what was repaired.
@@ -144,10 +202,12 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
             ),
             None => None,
         };
+        let timestamp_ns = row_ns(&id, f[t_col], timestamp);
         rows.push(TimeRow {
             id,
             timestamp,
             exposure_ms,
+            timestamp_ns,
         });
         lines.push(no);
     }
@@ -203,14 +263,26 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Times, DatasetError> {
     })
 }
 
-/// Writes times.txt (`id timestamp exposure`, or two columns when no exposure is known).
+/// Writes times.txt (`id timestamp exposure`, or two columns when no exposure is known); a
+/// row with nanoseconds gets its exact decimal seconds (9 decimals), else 6 decimals.
 pub fn times_text(rows: &[TimeRow]) -> String {
     let mut s = String::with_capacity(rows.len() * 40);
     for r in rows {
+        let t = match r.timestamp_ns {
+            Some(ns) => ns_to_seconds_text(ns),
+            None => format!("{:.6}", r.timestamp),
+        };
         match r.exposure_ms {
-            Some(e) => s.push_str(&format!("{} {:.6} {}\n", r.id, r.timestamp, e)),
-            None => s.push_str(&format!("{} {:.6}\n", r.id, r.timestamp)),
+            Some(e) => s.push_str(&format!("{} {t} {}\n", r.id, e)),
+            None => s.push_str(&format!("{} {t}\n", r.id)),
         }
     }
     s
+}
+
+impl Times {
+    /// The timestamps in integer nanoseconds, when every row has them exactly.
+    pub fn timestamps_ns(&self) -> Option<Vec<i64>> {
+        self.rows.iter().map(|r| r.timestamp_ns).collect()
+    }
 }

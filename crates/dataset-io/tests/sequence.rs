@@ -275,6 +275,7 @@ fn written_sequences_read_back() {
                     id: format!("{i:05}"),
                     timestamp: i as f64,
                     exposure_ms: Some(2.0),
+                    timestamp_ns: None,
                 },
                 &png,
             )

@@ -5,8 +5,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use camera_model::{
-    intrinsics_to_file_values, output_notes, CameraFile, CameraModel, ImageSize, Intrinsics,
-    OutputMode, RectifyMap,
+    intrinsics_to_file_values, output_notes, CalibrationFile, CalibrationFormat, CameraFile,
+    CameraModel, ImageSize, Intrinsics, OutputMode, RectifyMap,
 };
 
 use crate::{PipelineError, Result};
@@ -31,7 +31,11 @@ pub fn model_field_of_view(model: &CameraModel, size: ImageSize) -> Option<(f64,
 pub struct CameraSummary {
     /// The file.
     pub path: PathBuf,
-    /// What it holds.
+    /// Its format (camera.txt, Kalibr, EuRoC, Basalt, KITTI, ETH3D).
+    pub format: CalibrationFormat,
+    /// The camera read (`--cam N`) and its name in the file.
+    pub cam: (usize, String),
+    /// What it holds, as a camera.txt.
     pub file: CameraFile,
     /// The output camera (line 3 or the override).
     pub mode: OutputMode,
@@ -45,21 +49,75 @@ pub struct CameraSummary {
     pub warnings: Vec<String>,
 }
 
-/// Reads a camera.txt and computes its output camera (`mode` and `size` override lines 3
-/// and 4).
+/// The image size of a calibration file that gives none (KITTI's calib.txt, ETH3D's
+/// calibration.txt): `size_in`, else the first image of the camera's folder beside the file
+/// (`image_N/`, `rgb/`), else twice the principal point (with a warning).
+fn size_without_file(
+    path: &Path,
+    cam: usize,
+    k: Intrinsics,
+    size_in: Option<ImageSize>,
+    warnings: &mut Vec<String>,
+) -> ImageSize {
+    if let Some(s) = size_in {
+        return s;
+    }
+    let dir = path.parent().unwrap_or(Path::new("."));
+    for folder in [dir.join(format!("image_{cam}")), dir.join("rgb")] {
+        let Ok(rd) = std::fs::read_dir(&folder) else {
+            continue;
+        };
+        let mut files: Vec<PathBuf> = rd.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        files.sort();
+        if let Some(img) = files.iter().find_map(|f| dataset_io::read_gray8(f).ok()) {
+            return ImageSize::new(img.width(), img.height());
+        }
+    }
+    let guess = ImageSize::new(
+        (2.0 * k.cx + 1.0).round().max(2.0) as usize,
+        (2.0 * k.cy + 1.0).round().max(2.0) as usize,
+    );
+    warnings.push(format!(
+        "{}: the file gives no image size and no image folder is beside it: {guess} assumed from the principal point (give --size-in WxH)",
+        path.display()
+    ));
+    guess
+}
+
+/// Reads a calibration file of any supported format (camera.txt, Kalibr camchain.yaml, EuRoC
+/// sensor.yaml, Basalt calibration.json, KITTI calib.txt, ETH3D calibration.txt), takes
+/// camera `cam`, and computes its output camera (`mode` and `size` override camera.txt's lines
+/// 3 and 4; other formats default to `crop` at the input size). `size_in` gives the image
+/// size where the file has none.
 pub fn summarize_camera(
     path: &Path,
+    cam: usize,
     mode: Option<OutputMode>,
     size: Option<ImageSize>,
+    size_in: Option<ImageSize>,
 ) -> Result<CameraSummary> {
     let text = dataset_io::read_text(path).map_err(|source| PipelineError::Read {
         what: "the camera file",
         source,
     })?;
-    let file = CameraFile::parse(&text).map_err(|source| PipelineError::Camera {
+    let camera_err = |source| PipelineError::Camera {
         context: path.display().to_string(),
         source,
-    })?;
+    };
+    let cal = CalibrationFile::parse(&text).map_err(camera_err)?;
+    let calibrated = cal.camera(cam).map_err(camera_err)?;
+    let mut notes = Vec::new();
+    let input_size = match calibrated.size {
+        Some(s) => s,
+        None => size_without_file(
+            path,
+            cam,
+            calibrated.model.intrinsics(),
+            size_in,
+            &mut notes,
+        ),
+    };
+    let file = cal.camera_file(cam, Some(input_size)).map_err(camera_err)?;
     let mode = mode.unwrap_or(file.output);
     let out_size = size.unwrap_or(file.output_size);
     let mut warnings: Vec<String> = file
@@ -68,6 +126,7 @@ pub fn summarize_camera(
         .chain(&output_notes(&file.input, file.input_size, &mode, out_size))
         .map(|w| format!("{}: {w}", path.display()))
         .collect();
+    warnings.extend(notes);
     let map =
         RectifyMap::for_mode(&file.input, file.input_size, &mode, out_size).map_err(|source| {
             PipelineError::Camera {
@@ -84,6 +143,8 @@ pub fn summarize_camera(
     }
     Ok(CameraSummary {
         path: path.to_path_buf(),
+        format: cal.format,
+        cam: (cam, calibrated.name.clone()),
         camera: map.camera(),
         file,
         mode,
@@ -97,16 +158,36 @@ impl CameraSummary {
     /// The output camera as one JSON object (pixels, pixel centres at integers).
     pub fn json(&self) -> serde_json::Value {
         let k = &self.camera;
+        let i = self.file.input.intrinsics();
         serde_json::json!({
             "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
             "width": self.size.width, "height": self.size.height,
+            "format": self.format,
+            "cam": self.cam.0,
+            "name": self.cam.1,
+            "input": {
+                "model": self.file.input.name(),
+                "fx": i.fx, "fy": i.fy, "cx": i.cx, "cy": i.cy,
+                "distortion": self.file.input.distortion(),
+                "width": self.file.input_size.width, "height": self.file.input_size.height,
+            },
+            "output": self.mode.to_string(),
+            "invalid_pixels": self.invalid,
         })
     }
 
     /// The summary as text (`monovo camera`).
     pub fn text(&self) -> String {
         let (file, k, out_size, mode) = (&self.file, &self.camera, self.size, &self.mode);
-        let mut s = format!("input:  {} ({})\n", file.input, file.input_size);
+        let mut s = format!(
+            "file:   {} ({}, camera {} `{}`)\ninput:  {} ({})\n",
+            self.path.display(),
+            self.format,
+            self.cam.0,
+            self.cam.1,
+            file.input,
+            file.input_size
+        );
         if let Some((h, v)) = model_field_of_view(&file.input, file.input_size) {
             let _ = writeln!(s, "        field of view {h:.1} x {v:.1} degrees");
         }

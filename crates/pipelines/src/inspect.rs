@@ -36,10 +36,23 @@ pub fn read_vignette(path: &Path, images: ImageSize) -> Result<Vignette> {
 pub struct SequenceInfo {
     /// The folder.
     pub sequence: PathBuf,
+    /// The layout it was read as (`monovo`, `tum-vi-dso`, `euroc-asl`, `4seasons`, `kitti`,
+    /// `tum-rgbd`).
+    pub layout: &'static str,
+    /// The camera read (`--cam N`).
+    pub cam: usize,
     /// Frames.
     pub frames: usize,
-    /// `images.zip` or `images/`.
-    pub images: &'static str,
+    /// `images.zip`, `images/`, or the layout's image folder.
+    pub images: String,
+    /// First and last timestamp in integer nanoseconds, when the dataset gives them exactly.
+    pub timestamps_ns: Option<(i64, i64)>,
+    /// First and last exposure in ms, when every frame has one.
+    pub exposure_first_last_ms: Option<(f64, f64)>,
+    /// The calibration file the camera came from.
+    pub camera_file: Option<PathBuf>,
+    /// The dataset's own ground truth file (EuRoC, TUM-VI, 4Seasons, KITTI, TUM RGB-D).
+    pub dataset_ground_truth: Option<PathBuf>,
     /// Image size.
     pub size: ImageSize,
     /// Bits per sample.
@@ -89,10 +102,16 @@ fn check_frames(seq: &Sequence, observer: &dyn Observer) -> Vec<String> {
     problems
 }
 
-/// Opens and checks a sequence folder (every frame decoded unless `quick`). Only a folder
-/// that cannot be opened at all is an error; everything else is a problem in the report.
-pub fn inspect_sequence(dir: &Path, quick: bool, observer: &dyn Observer) -> Result<SequenceInfo> {
-    let seq = Sequence::open(dir)?;
+/// Opens and checks a sequence folder of any layout, camera `cam` (every frame decoded unless
+/// `quick`). Only a folder that cannot be opened at all is an error; everything else is a
+/// problem in the report.
+pub fn inspect_sequence(
+    dir: &Path,
+    cam: usize,
+    quick: bool,
+    observer: &dyn Observer,
+) -> Result<SequenceInfo> {
+    let seq = Sequence::open_camera(dir, cam)?;
     let rows = &seq.times().rows;
     let n = seq.len();
     let duration_s = match (rows.first(), rows.last()) {
@@ -107,8 +126,11 @@ pub fn inspect_sequence(dir: &Path, quick: bool, observer: &dyn Observer) -> Res
     let fps = dts.get(dts.len() / 2).map_or(0.0, |d| 1.0 / d);
     let size = seq.image_size();
     let mut problems: Vec<String> = Vec::new();
-    let camera_path = dir.join("camera.txt");
+    let camera_path = seq
+        .camera_path()
+        .map_or_else(|| seq.dir().join("camera.txt"), Path::to_path_buf);
     let mut warnings: Vec<String> = seq.times().warnings.clone();
+    warnings.extend(seq.layout_warnings.iter().cloned());
     let camera = seq.camera().map(|c| {
         let out = camera_model::output_intrinsics(&c.input, c.input_size, &c.output, c.output_size);
         let notes = camera_model::output_notes(&c.input, c.input_size, &c.output, c.output_size);
@@ -127,8 +149,9 @@ pub fn inspect_sequence(dir: &Path, quick: bool, observer: &dyn Observer) -> Res
     });
     if camera.is_none() {
         warnings.push(format!(
-            "{}: absent; rectify and DSO need the camera model",
-            camera_path.display()
+            "{}: absent (nor the {} layout's calibration file); rectify and DSO need the camera model",
+            camera_path.display(),
+            seq.layout().name()
         ));
     }
     let pcalib = seq.pcalib_path.as_ref().map(|p| {
@@ -184,14 +207,33 @@ pub fn inspect_sequence(dir: &Path, quick: bool, observer: &dyn Observer) -> Res
     };
     let frames_failed = frame_problems.len();
     problems.extend(frame_problems);
+    let images = if seq.is_zipped() {
+        "images.zip".to_string()
+    } else if seq.layout() == dataset_io::Layout::Monovo {
+        "images/".to_string()
+    } else {
+        let first = seq.names().first().cloned().unwrap_or_default();
+        format!("{} ({} ... )", seq.layout().name(), first)
+    };
+    let timestamps_ns = seq
+        .timestamps_ns()
+        .and_then(|v| Some((*v.first()?, *v.last()?)));
+    let exposure_first_last_ms = match (rows.first(), rows.last()) {
+        (Some(a), Some(b)) if seq.times().exposure_range().is_some() => {
+            a.exposure_ms.zip(b.exposure_ms)
+        }
+        _ => None,
+    };
     Ok(SequenceInfo {
         sequence: dir.to_path_buf(),
+        layout: seq.layout().name(),
+        cam,
         frames: n,
-        images: if seq.is_zipped() {
-            "images.zip"
-        } else {
-            "images/"
-        },
+        images,
+        timestamps_ns,
+        exposure_first_last_ms,
+        camera_file: seq.camera_path().map(Path::to_path_buf),
+        dataset_ground_truth: seq.dataset_ground_truth.clone(),
         size,
         bits: seq.bits_per_sample(),
         duration_s,
@@ -213,6 +255,8 @@ impl SequenceInfo {
     pub fn json(&self) -> serde_json::Value {
         serde_json::json!({
             "sequence": self.sequence.display().to_string(),
+            "layout": self.layout,
+            "cam": self.cam,
             "frames": self.frames,
             "images": self.images,
             "width": self.size.width,
@@ -220,9 +264,15 @@ impl SequenceInfo {
             "bits": self.bits,
             "duration_s": self.duration_s,
             "fps": self.fps,
-            "exposure_ms": self.exposure_ms.map(|(a, b)| serde_json::json!({"min": a, "max": b})),
+            "timestamps_ns": self.timestamps_ns.map(|(a, b)| [a, b]),
+            "exposure_ms": self.exposure_ms.map(|(a, b)| {
+                let (first, last) = self.exposure_first_last_ms.unwrap_or((a, b));
+                serde_json::json!({"min": a, "max": b, "first": first, "last": last})
+            }),
             "camera": self.camera.as_ref().map(|(c, out)| serde_json::json!({
+                "file": self.camera_file.as_ref().map(|p| p.display().to_string()),
                 "model": c.input.name(),
+                "input": {"fx": c.input.intrinsics().fx, "fy": c.input.intrinsics().fy, "cx": c.input.intrinsics().cx, "cy": c.input.intrinsics().cy, "distortion": c.input.distortion()},
                 "output": c.output.to_string(),
                 "output_width": c.output_size.width,
                 "output_height": c.output_size.height,
@@ -234,6 +284,7 @@ impl SequenceInfo {
                 let (s, e) = g.segment_sizes();
                 serde_json::json!({"rows": g.len(), "start_segment": s, "end_segment": e})
             }),
+            "dataset_ground_truth": self.dataset_ground_truth.as_ref().map(|p| p.display().to_string()),
             "frames_checked": self.frames_checked,
             "problems": self.problems,
             "warnings": self.warnings,
@@ -244,6 +295,7 @@ impl SequenceInfo {
     pub fn text(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "sequence:     {}", self.sequence.display());
+        let _ = writeln!(s, "layout:       {} (camera {})", self.layout, self.cam);
         let _ = writeln!(
             s,
             "images:       {} frames of {}, {}-bit, in {}",
@@ -254,9 +306,12 @@ impl SequenceInfo {
             "time:         {:.2} s at {:.2} fps (median frame interval)",
             self.duration_s, self.fps
         );
+        if let Some((a, b)) = self.timestamps_ns {
+            let _ = writeln!(s, "stamps:       {a} .. {b} ns");
+        }
         let _ = match self.exposure_ms {
             Some((a, b)) => writeln!(s, "exposure:     {a:.4} .. {b:.4} ms"),
-            None => writeln!(s, "exposure:     unknown (times.txt has two columns)"),
+            None => writeln!(s, "exposure:     unknown (not logged for every frame)"),
         };
         let _ = match &self.camera {
             Some((c, Ok(k))) => writeln!(
@@ -267,6 +322,9 @@ impl SequenceInfo {
             Some((c, Err(_))) => writeln!(s, "camera:       {} (INVALID output camera)", c.input),
             None => writeln!(s, "camera:       no camera.txt"),
         };
+        if let Some(p) = &self.camera_file {
+            let _ = writeln!(s, "calibration:  {}", p.display());
+        }
         let _ = match &self.pcalib {
             Some(Ok((n, bits))) => writeln!(
                 s,
@@ -290,7 +348,10 @@ impl SequenceInfo {
                 )
             }
             Some(Err(_)) => writeln!(s, "ground truth: INVALID"),
-            None => writeln!(s, "ground truth: absent"),
+            None => match &self.dataset_ground_truth {
+                Some(p) => writeln!(s, "ground truth: {}", p.display()),
+                None => writeln!(s, "ground truth: absent"),
+            },
         };
         if !self.frames_checked {
             s.push_str("frames:       not decoded (--quick)\n");

@@ -15,7 +15,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use camera_model::{output_notes, CameraFile, Image, ImageSize, OutputMode, RectifyMap};
@@ -48,8 +48,10 @@ pub struct RectifyJob {
     pub reverse: bool,
     /// Frame range `A..B` (0-based, B exclusive; either end may be omitted).
     pub range: Option<String>,
-    /// Bits per output pixel (8 or 16).
-    pub depth: u8,
+    /// Bits per output pixel (8 or 16); default: the input's (16-bit frames stay 16-bit).
+    pub depth: Option<u8>,
+    /// The camera of a multi-camera dataset (`--cam N`, TUM-VI, EuRoC, 4Seasons, KITTI).
+    pub cam: usize,
     /// Write the frames into images.zip instead of images/.
     pub zip: bool,
     /// How the PNG frames are compressed.
@@ -80,7 +82,8 @@ impl RectifyJob {
             scale: None,
             reverse: false,
             range: None,
-            depth: 8,
+            depth: None,
+            cam: 0,
             zip: false,
             compression: FrameCompression::Fast,
             force: false,
@@ -364,19 +367,22 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             )));
         }
     }
-    let seq = Sequence::open(&args.sequence)?;
-    for w in &seq.times().warnings {
+    let seq = Sequence::open_camera(&args.sequence, args.cam)?;
+    for w in seq.times().warnings.iter().chain(&seq.layout_warnings) {
         observer.warn(w);
     }
     let Some(cam) = seq.camera() else {
         return Err(PipelineError::Invalid(format!(
-            "{}: no camera.txt; rectify needs the camera model",
-            args.sequence.display()
+            "{}: no camera.txt (or the {} layout's calibration file); rectify needs the camera model",
+            args.sequence.display(),
+            seq.layout().name()
         )));
     };
     let mode = args.pinhole.unwrap_or(cam.output);
     let out_size = args.size.unwrap_or(cam.output_size);
-    let camera_path = args.sequence.join("camera.txt");
+    let camera_path = seq
+        .camera_path()
+        .map_or_else(|| args.sequence.join("camera.txt"), Path::to_path_buf);
     for w in cam
         .warnings
         .iter()
@@ -385,6 +391,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         observer.warn(&format!("{}: {w}", camera_path.display()));
     }
     let in_bits = seq.bits_per_sample();
+    let out_depth = args.depth.unwrap_or(if in_bits == 16 { 16 } else { 8 });
     let mut bits = bit_depth.unwrap_or(in_bits);
     if in_bits == 8 && bits != 8 {
         return Err(PipelineError::Invalid(format!(
@@ -479,7 +486,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             bits = r.bits();
         }
     }
-    let max16 = if args.depth == 16 { 65535.0 } else { 255.0 };
+    let max16 = if out_depth == 16 { 65535.0 } else { 255.0 };
     let mut scale_source = None;
     let pixels = if photometric {
         let Some(resp) = &response else {
@@ -527,7 +534,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
                 scale_source = Some("--scale".to_string());
                 s
             }
-            None if args.irradiance && args.depth == 8 => {
+            None if args.irradiance && out_depth == 8 => {
                 let corr = corr.insert(float_correction()?);
                 let (w, h) = (out_size.width, out_size.height);
                 let sample = |f: &dataset_io::NativeFrame| -> Result<Image<f32>> {
@@ -574,7 +581,7 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
                     vignette.as_ref(),
                     map,
                     scale,
-                    args.depth,
+                    out_depth,
                 )?),
                 scale,
             )
@@ -626,13 +633,13 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
     observer.begin(indices.len() as u64, "rectifying", "frames");
     let threads = rayon::current_num_threads();
     let mut done = 0usize;
-    let depth = args.depth;
+    let depth = out_depth;
     let irradiance = args.irradiance;
     let reverse = args.reverse;
     let sample_max = (1u32 << bits) - 1;
     let speed = args.compression.png();
     let mut vignette_png = None;
-    let work = |frame: dataset_io::NativeFrame| -> Result<(f64, Option<f64>, Vec<u8>)> {
+    let work = |frame: dataset_io::NativeFrame| -> Result<OutFrame> {
         let (w, h) = (out_size.width, out_size.height);
         let label = || format!("frame {} ({})", frame.index, frame.name);
         if let GrayImage::U16(img) = &frame.image {
@@ -704,20 +711,25 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         } else {
             frame.timestamp
         };
+        // nanoseconds stay integers, mapped as the seconds are
+        let ns = frame
+            .timestamp_ns
+            .map(|ns| if reverse { BACKWARDS_EPOCH_NS - ns } else { ns });
         let e = if irradiance {
             Some(1.0)
         } else {
             frame.exposure_ms
         };
         observer.advance(1);
-        Ok((t, e, png))
+        Ok((t, ns, e, png))
     };
-    let sink = |(t, e, png): (f64, Option<f64>, Vec<u8>)| -> Result<()> {
+    let sink = |(t, ns, e, png): OutFrame| -> Result<()> {
         writer.add_frame(
             TimeRow {
                 id: ids[done].clone(),
                 timestamp: t,
                 exposure_ms: e,
+                timestamp_ns: ns,
             },
             &png,
         )?;
@@ -760,6 +772,12 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
         jpeg_decoder: dataset_io::JPEG_DECODER,
     })
 }
+
+/// A rectified frame: timestamp (s, and ns when exact), exposure (ms), PNG bytes.
+type OutFrame = (f64, Option<i64>, Option<f64>, Vec<u8>);
+
+/// [`eval_metrics::BACKWARDS_EPOCH`] in nanoseconds.
+const BACKWARDS_EPOCH_NS: i64 = 2_000_000_000_000_000_000;
 
 /// Quantises a corrected float frame to 8 or 16 bits.
 fn encode_float(out: &Image<f32>, scale: f32, depth: u8, speed: PngSpeed) -> Result<Vec<u8>> {

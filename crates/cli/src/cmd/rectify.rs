@@ -42,9 +42,12 @@ pub struct Args {
     /// Frame range A..B (0-based, B exclusive; either end may be omitted).
     #[arg(long, value_name = "A..B")]
     pub range: Option<String>,
-    /// Bits per output pixel.
-    #[arg(long, default_value_t = 8, value_parser = parse_depth)]
-    pub depth: u8,
+    /// Bits per output pixel, 8 or 16 (default: the input's: 16-bit frames stay 16-bit).
+    #[arg(long, value_parser = parse_depth)]
+    pub depth: Option<u8>,
+    /// The camera of a multi-camera dataset (TUM-VI, EuRoC, 4Seasons, KITTI): camN, image_N.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub cam: usize,
     /// Write the frames into images.zip instead of images/.
     #[arg(long)]
     pub zip: bool,
@@ -78,6 +81,13 @@ Examples:
   monovo rectify sequence_01 -o seq01_lin --photometric --depth 16   # undo response and vignette
   monovo rectify sequence_01 -o seq01_raw --compression none         # stored PNG: fastest, 2x disk
   monovo rectify sequence_01 -o seq01_fast --half-decode             # JPEG decoded at half size
+  monovo rectify dataset-room1_512_16 -o room1 --cam 1 --pinhole \"0.3 0.3 0.5 0.5 0\" --size 512x512
+  monovo rectify MH_01_easy -o mh01 --pinhole crop --size 752x480    # EuRoC: mav0/cam0, sensor.yaml
+
+The input may be any layout `monovo info` reads: a monovo/DSO folder, TUM-VI (dso/camN or
+mav0), EuRoC/ASL (mav0/camN with sensor.yaml, Basalt's exposure.csv), 4Seasons, KITTI
+odometry or TUM RGB-D / ETH3D, each with its own calibration file; times.txt then carries the
+dataset's own timestamps (exact nanoseconds) and exposures.
 
 OUT is a new sequence folder that monovo and DSO read: PNG frames in images/ (or images.zip
 with --zip), times.txt and a pinhole camera.txt. Without --photometric, pcalib.txt is copied
@@ -129,6 +139,7 @@ impl Args {
             reverse: self.reverse,
             range: self.range.clone(),
             depth: self.depth,
+            cam: self.cam,
             zip: self.zip,
             compression: self.compression,
             force: self.force,
