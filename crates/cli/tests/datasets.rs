@@ -383,3 +383,99 @@ fn kitti_and_tum_rgbd() {
     assert_eq!(v["timestamps_ns"][0].as_i64(), Some(1305031102175304000));
     rectify_matches_scene(&t, &[], [1.0, 1.5, 0.5, 0.5], ImageSize::new(370, 229));
 }
+
+/// `monovo eval --gt DIR` on EuRoC: the state csv (the IMU's poses, 17 columns) moved to the
+/// camera by sensor.yaml's T_BS and sampled at the frames; an estimate that is a similarity
+/// of the camera's true path scores zero error, and reading the IMU's path instead would not.
+#[test]
+fn eval_reads_euroc_ground_truth_at_the_frames() {
+    let root = temp_dir("datasets_euroc_eval");
+    let (model, size) = camera_of("calib/scratch_slam__mav0__cam0__sensor.yaml", 0);
+    let frame = render(&model, size, 1.0);
+    let t0 = 1403636579763555584i64;
+    let mut csv = String::from("#timestamp [ns],filename\n");
+    for i in 0..16 {
+        let ns = t0 + i * 50_000_000;
+        csv.push_str(&format!("{ns},{ns}.png\n"));
+        write_png(
+            &root.join(format!("mav0/cam0/data/{ns}.png")),
+            size,
+            &frame,
+            false,
+        );
+    }
+    std::fs::write(root.join("mav0/cam0/data.csv"), csv).unwrap();
+    copy(
+        "calib/scratch_slam__mav0__cam0__sensor.yaml",
+        &root.join("mav0/cam0/sensor.yaml"),
+    );
+    let cal = CalibrationFile::parse(
+        &std::fs::read_to_string(fixture("calib/scratch_slam__mav0__cam0__sensor.yaml")).unwrap(),
+    )
+    .unwrap();
+    let imu_from_cam = camera_model::invert_rigid(&cal.cameras[0].camera_from_imu.unwrap());
+    // the IMU on a helix, turning three times as fast (yaw = 3 t): the camera's path is then
+    // no similarity of the IMU's
+    let imu = |t: f64| {
+        let (s, c) = ((3.0 * t).sin(), (3.0 * t).cos());
+        (
+            [t.cos(), t.sin(), 0.1 * t],
+            [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+        )
+    };
+    let mut gt = String::from("#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]\n");
+    for k in -20..180i64 {
+        let ns = t0 + k * 5_000_000;
+        let t = (ns - t0) as f64 * 1e-9;
+        let (p, _) = imu(t);
+        let (qw, qz) = ((1.5 * t).cos(), (1.5 * t).sin());
+        gt.push_str(&format!(
+            "{ns},{},{},{},{qw},0,0,{qz},0,0,0,0,0,0,0,0,0\n",
+            p[0], p[1], p[2]
+        ));
+    }
+    let gt_dir = root.join("mav0/state_groundtruth_estimate0");
+    std::fs::create_dir_all(&gt_dir).unwrap();
+    std::fs::write(gt_dir.join("data.csv"), gt).unwrap();
+    // the estimate: the camera's true centres, scaled by 2 and shifted
+    let mut est = String::new();
+    for i in 0..16 {
+        let ns = t0 + i * 50_000_000;
+        let t = (ns - t0) as f64 * 1e-9;
+        let (p, r) = imu(t);
+        let c: Vec<f64> = (0..3)
+            .map(|a| p[a] + (0..3).map(|b| r[a][b] * imu_from_cam[b][3]).sum::<f64>())
+            .collect();
+        est.push_str(&format!(
+            "{:.9} {} {} {} 0 0 0 1\n",
+            ns as f64 * 1e-9,
+            2.0 * c[0] + 1.0,
+            2.0 * c[1],
+            2.0 * c[2] - 3.0
+        ));
+    }
+    let est_path = root.join("est.txt");
+    std::fs::write(&est_path, est).unwrap();
+    let o = monovo(&[
+        "eval",
+        est_path.to_str().unwrap(),
+        "--gt",
+        root.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["status"], "ok", "{v}");
+    let rmse = v["e_rmse"].as_f64().unwrap();
+    assert!(rmse < 1e-9, "{v}");
+    // the IMU's own csv as --gt (no transform): the same estimate no longer fits exactly
+    let o = monovo(&[
+        "eval",
+        est_path.to_str().unwrap(),
+        "--gt",
+        gt_dir.join("data.csv").to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert!(v["e_rmse"].as_f64().unwrap() > 1e-3, "{v}");
+}

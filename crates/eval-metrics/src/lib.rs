@@ -36,6 +36,7 @@
 #![deny(missing_docs)]
 
 mod batch;
+mod dataset_truth;
 mod evaluate;
 mod sim3;
 mod table;
@@ -46,6 +47,9 @@ pub use nalgebra;
 pub use batch::{
     cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
     DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+};
+pub use dataset_truth::{
+    detect_ground_truth_format, parse_gnss_poses, parse_ground_truth_trajectory, GroundTruthFormat,
 };
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,

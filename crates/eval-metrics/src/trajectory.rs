@@ -74,7 +74,7 @@ pub enum TrajectoryFormat {
 
 const MAX_FOUND: usize = 120;
 
-fn excerpt(line: &str) -> String {
+pub(crate) fn excerpt(line: &str) -> String {
     let t = line.trim();
     if t.len() <= MAX_FOUND {
         t.to_string()
@@ -89,7 +89,7 @@ fn excerpt(line: &str) -> String {
 
 /// Iterates the data lines of a text: 1-based line number and content, skipping blank lines
 /// and `#` comments (and a UTF-8 byte-order mark at the start).
-fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+pub(crate) fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     text.lines().enumerate().filter_map(|(i, l)| {
         let t = l.trim();
@@ -127,7 +127,7 @@ fn line_error(line_no: usize, line: &str, expected: &'static str, n: usize) -> E
 
 /// Parses exactly `N` numbers (or at least `N` when `allow_more`) separated by whitespace or
 /// commas. NaN and infinities parse (the evaluation decides what they mean).
-fn parse_fields<const N: usize>(
+pub(crate) fn parse_fields<const N: usize>(
     line_no: usize,
     line: &str,
     expected: &'static str,
@@ -160,7 +160,7 @@ fn parse_fields<const N: usize>(
 const TUM_EXPECTED: &str = "8 numbers `t x y z qx qy qz qw`";
 
 /// Refuses a finite quaternion of (nearly) zero norm: no rotation, whatever the position.
-fn check_quaternion(line_no: usize, line: &str, q: [f64; 4]) -> Result<(), EvalError> {
+pub(crate) fn check_quaternion(line_no: usize, line: &str, q: [f64; 4]) -> Result<(), EvalError> {
     let n2: f64 = q.iter().map(|v| v * v).sum();
     if n2.is_finite() && n2 < 1e-12 {
         return Err(EvalError::NotARotation {

@@ -4,5 +4,6 @@
 mod align;
 mod batch;
 mod common;
+mod dataset_truth;
 mod metrics;
 mod parse;

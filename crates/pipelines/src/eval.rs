@@ -5,7 +5,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use eval_metrics::{
-    detect_format, parse_euroc, parse_kitti, parse_tum, principal_plane, Evaluation, GroundTruth,
+    detect_format, detect_ground_truth_format, parse_euroc, parse_ground_truth_trajectory,
+    parse_kitti, parse_tum, principal_plane, Evaluation, GroundTruth, GroundTruthFormat,
     Trajectory, TrajectoryFormat,
 };
 use monovo_figures::{Chart, Corner, Figure, Panel, Series, PALETTE};
@@ -49,17 +50,90 @@ pub fn load_trajectory(
     })
 }
 
-/// Reads groundtruthSync.txt.
+/// Reads a ground-truth file: groundtruthSync.txt or any TUM-format file, EuRoC's state csv
+/// or TUM-VI's mocap csv (the IMU's positions: give the sequence folder to move them to the
+/// camera), or 4Seasons' GNSSPoses.txt; or a sequence folder of any layout (see
+/// [`load_sequence_ground_truth`]).
 pub fn load_ground_truth(path: &Path) -> Result<GroundTruth> {
+    if path.is_dir() {
+        return load_sequence_ground_truth(path, 0);
+    }
     let text = dataset_io::read_text(path).map_err(|source| PipelineError::Read {
         what: "the ground truth",
         source,
     })?;
-    GroundTruth::parse(&text).map_err(|source| PipelineError::Eval {
+    let eval_err = |source| PipelineError::Eval {
         what: "the ground truth ",
         path: path.to_path_buf(),
         source,
-    })
+    };
+    match detect_ground_truth_format(&text) {
+        GroundTruthFormat::Tum => GroundTruth::parse(&text).map_err(eval_err),
+        GroundTruthFormat::Kitti => Err(PipelineError::Invalid(format!(
+            "{}: KITTI poses (12 numbers a line) have no timestamps: give the sequence folder (sequences/XX) as --gt",
+            path.display()
+        ))),
+        f => {
+            let traj = parse_ground_truth_trajectory(&text, f, None).map_err(eval_err)?;
+            GroundTruth::from_trajectory(&traj, None, None, 0.0).map_err(eval_err)
+        }
+    }
+}
+
+/// The ground truth of a sequence folder of any layout, camera `cam`: its groundtruthSync.txt,
+/// else the dataset's own file (EuRoC, TUM-VI, 4Seasons, KITTI, TUM RGB-D) moved from the
+/// IMU to the camera where the poses are the IMU's (the calibration's IMU-to-camera
+/// transform) and sampled at the frames' timestamps by linear interpolation between
+/// ground-truth poses at most 3 of their median intervals apart (NaN elsewhere), as
+/// groundtruthSync.txt is.
+pub fn load_sequence_ground_truth(dir: &Path, cam: usize) -> Result<GroundTruth> {
+    let seq = dataset_io::Sequence::open_camera(dir, cam)?;
+    if let Some(p) = &seq.ground_truth_path {
+        return load_ground_truth(p);
+    }
+    let Some(path) = seq.dataset_ground_truth.clone() else {
+        return Err(PipelineError::Invalid(format!(
+            "{}: no ground truth found (groundtruthSync.txt, or the {} layout's own file)",
+            dir.display(),
+            seq.layout().name()
+        )));
+    };
+    let text = dataset_io::read_text(&path).map_err(|source| PipelineError::Read {
+        what: "the ground truth",
+        source,
+    })?;
+    let eval_err = |source| PipelineError::Eval {
+        what: "the ground truth ",
+        path: path.clone(),
+        source,
+    };
+    let format = detect_ground_truth_format(&text);
+    let times: Vec<f64> = seq.times().rows.iter().map(|r| r.timestamp).collect();
+    let times_text: String = times.iter().map(|t| format!("{t}\n")).collect();
+    let traj = parse_ground_truth_trajectory(&text, format, Some(&times_text)).map_err(eval_err)?;
+    // EuRoC's and TUM-VI's csv give the IMU's (body's) pose
+    let body_from_camera = match (format, seq.camera_from_imu()) {
+        (GroundTruthFormat::Euroc, Some(t)) => Some(isometry(&camera_model::invert_rigid(t))),
+        _ => None,
+    };
+    let mut dts: Vec<f64> = traj
+        .poses
+        .windows(2)
+        .map(|w| (w[1].t - w[0].t).abs())
+        .collect();
+    dts.sort_by(f64::total_cmp);
+    let max_gap = 3.0 * dts.get(dts.len() / 2).copied().unwrap_or(0.0);
+    GroundTruth::from_trajectory(&traj, body_from_camera.as_ref(), Some(&times), max_gap)
+        .map_err(eval_err)
+}
+
+/// A rigid 4x4 transform (row-major) as an isometry (its rotation re-orthonormalised).
+fn isometry(t: &camera_model::Transform) -> nalgebra::Isometry3<f64> {
+    let r = nalgebra::Matrix3::new(
+        t[0][0], t[0][1], t[0][2], t[1][0], t[1][1], t[1][2], t[2][0], t[2][1], t[2][2],
+    );
+    let q = nalgebra::UnitQuaternion::from_matrix(&r);
+    nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(t[0][3], t[1][3], t[2][3]), q)
 }
 
 /// `None` for an infinite or NaN metric (JSON `null`).

@@ -43,8 +43,8 @@ pub use batch::{
 pub use camera::{summarize_camera, CameraSummary};
 pub use error::{error_chain, json_number, PipelineError, Result, WithContext};
 pub use eval::{
-    alignment_figure, evaluation_text, load_ground_truth, load_trajectory, save_alignment_figure,
-    EvaluationReport,
+    alignment_figure, evaluation_text, load_ground_truth, load_sequence_ground_truth,
+    load_trajectory, save_alignment_figure, EvaluationReport,
 };
 pub use experiment::{run_experiment, Experiment, ExperimentReport, Layout};
 pub use inspect::{inspect_sequence, read_vignette, SequenceInfo};

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use eval_metrics::{evaluate, TrajectoryFormat};
 use monovo_pipelines::{
-    evaluation_text, load_ground_truth, load_trajectory, save_alignment_figure, EvaluationReport,
+    evaluation_text, load_ground_truth, load_sequence_ground_truth, load_trajectory,
+    save_alignment_figure, EvaluationReport,
 };
 
 use crate::plot;
@@ -30,6 +31,9 @@ Examples:
   monovo eval results/dso/sequence_01/fwd_0.txt --gt sequence_01/groundtruthSync.txt
   monovo eval run.txt --gt groundtruthSync.txt --json
   monovo eval run.txt --gt groundtruthSync.txt --plot alignment.png
+  monovo eval run.txt --gt dataset-room1_512_16 --cam 0     # TUM-VI: mocap moved to cam0
+  monovo eval run.txt --gt MH_01_easy                       # EuRoC: state csv at the frames
+  monovo eval run.txt --gt recording_2020-03-24_17-36-22     # 4Seasons: GNSSPoses.txt
 
 The estimate is sorted by time, every pose is associated with the ground-truth row within
 1 ms, and the start and end segments (the first and second half of the ground-truth rows
@@ -43,9 +47,14 @@ original timestamps in reverse order or the 2e9 - t convention.")]
 pub struct Args {
     /// The estimated trajectory (camera-to-world poses; keyframes are fine).
     pub trajectory: PathBuf,
-    /// The sequence's groundtruthSync.txt.
-    #[arg(long, value_name = "FILE")]
+    /// The ground truth: groundtruthSync.txt, a TUM-format file, EuRoC's state csv, TUM-VI's
+    /// mocap csv, 4Seasons' GNSSPoses.txt; or a sequence folder of any layout, whose own
+    /// ground truth is moved to the camera and sampled at its frames.
+    #[arg(long, value_name = "FILE|DIR")]
     pub gt: PathBuf,
+    /// The camera of a multi-camera dataset given as --gt DIR.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub cam: usize,
     /// Trajectory format.
     #[arg(long, value_enum, default_value_t = FormatArg::Auto)]
     pub format: FormatArg,
@@ -81,7 +90,11 @@ pub fn run(args: &Args) -> Result<()> {
         plot::format_of(p)?;
         dataset_io::check_output_file(p, args.force)?;
     }
-    let gt = load_ground_truth(&args.gt)?;
+    let gt = if args.gt.is_dir() {
+        load_sequence_ground_truth(&args.gt, args.cam)?
+    } else {
+        load_ground_truth(&args.gt)?
+    };
     let traj = load_trajectory(
         &args.trajectory,
         args.format.format(),
