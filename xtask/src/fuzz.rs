@@ -165,6 +165,56 @@ fn run_camera(b: &[u8]) -> bool {
     true
 }
 
+/// Every calibration format (Kalibr YAML, EuRoC sensor.yaml, Basalt JSON, KITTI, ETH3D,
+/// camera.txt): each camera projects and unprojects, and now and then builds its maps.
+fn run_calibration(b: &[u8]) -> bool {
+    let Ok(cal) = camera_model::CalibrationFile::parse(&text(b)) else {
+        return false;
+    };
+    for (i, c) in cal.cameras.iter().enumerate() {
+        for p in [[0.1, -0.2, 1.0], [1.0, 0.5, -0.3], [0.0, 0.0, 1.0]] {
+            if let Some(px) = c.model.project(p) {
+                let _ = c.model.unproject(px);
+            }
+        }
+        let _ = c.camera_from_imu.as_ref().map(camera_model::invert_rigid);
+        if let Ok(f) = cal.camera_file(i, Some(camera_model::ImageSize::new(64, 48))) {
+            if input_hash(b).is_multiple_of(CAMERA_GEOMETRY_EVERY) {
+                camera_geometry(&f);
+            }
+        }
+    }
+    true
+}
+
+/// The layouts' listings: ASL data.csv, Basalt's exposure.csv, TUM RGB-D's rgb.txt.
+fn run_listing(b: &[u8]) -> bool {
+    let t = text(b);
+    let p = Path::new("data.csv");
+    let a = dataset_io::parse_data_csv(&t, p).is_ok();
+    let e = dataset_io::parse_exposure_csv(&t, p).is_ok();
+    let r = dataset_io::parse_rgb_list(&t, p).is_ok();
+    if let Some(ns) = dataset_io::seconds_to_ns(&t) {
+        let _ = dataset_io::ns_to_seconds_text(ns);
+    }
+    a || e || r
+}
+
+/// Ground truth in the datasets' formats (EuRoC/TUM-VI csv, GNSSPoses, KITTI, TUM), made
+/// per frame.
+fn run_dataset_truth(b: &[u8]) -> bool {
+    let t = text(b);
+    let f = eval_metrics::detect_ground_truth_format(&t);
+    let Ok(traj) = eval_metrics::parse_ground_truth_trajectory(&t, f, Some("0\n1\n2\n")) else {
+        return false;
+    };
+    let body = eval_metrics::nalgebra::Isometry3::translation(0.1, 0.0, 0.0);
+    let _ = eval_metrics::GroundTruth::from_trajectory(&traj, Some(&body), None, 0.0);
+    let frames: Vec<f64> = traj.poses.iter().take(50).map(|p| p.t + 0.001).collect();
+    let _ = eval_metrics::GroundTruth::from_trajectory(&traj, None, Some(&frames), 0.5);
+    true
+}
+
 fn run_camera_values(b: &[u8]) -> bool {
     let t = text(b);
     let mode = t.parse::<camera_model::OutputMode>().is_ok();
@@ -586,7 +636,65 @@ fn targets(root: &Path) -> Result<Vec<Target>> {
             .take(4)
             .cloned(),
     );
+    let datasets = root.join("tests/fixtures/datasets");
+    let read_dir = |sub: &str, limit: usize| -> Result<Vec<Vec<u8>>> {
+        let dir = datasets.join(sub);
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| dir.display().to_string())?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
+        files.sort();
+        files
+            .into_iter()
+            .map(|p| {
+                Ok(head(
+                    std::fs::read(&p).with_context(|| p.display().to_string())?,
+                    limit,
+                    true,
+                ))
+            })
+            .collect()
+    };
+    let mut calibrations = read_dir("calib", 6144)?;
+    calibrations.push(b"726.28741455078 726.28741455078 354.6496887207 186.46566772461\n".to_vec());
+    calibrations.extend(
+        read_dir("heads", 4096)?
+            .into_iter()
+            .filter(|h| h.starts_with(b"P0:")),
+    );
+    let heads = read_dir("heads", 4096)?;
+    let listings = vec![
+        b"#timestamp [ns],filename\n1403636579763555584,1403636579763555584.png\n1403636579813555456,1403636579813555456.png\n".to_vec(),
+        b"#timestamp [ns],exposure [ns]\n1403636579763555584,5000000\n1403636579813555456,5250000\n".to_vec(),
+        b"# color images\n1305031102.175304 rgb/1305031102.175304.png\n1305031102.211214 rgb/1305031102.211214.png\n".to_vec(),
+        b"1520530308.199447626".to_vec(),
+    ];
+    let mut truths: Vec<Vec<u8>> = heads.clone();
+    truths.push(b"# timestamp, tx, ty, tz, qx, qy, qz, qw, scale, fusion_quality, v3_quality\n1585067782140857088,1.0,2.0,3.0,0,0,0,1,2.5,1,1\n1585067782206857216,1.1,2.0,3.0,0,0,0,1,2.5,1,1\n".to_vec());
+    truths.push(b"#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n1520530308199447626,0.88,-0.29,1.20,0.71,0.03,-0.02,-0.69\n1520530308207780959,0.88,-0.29,1.21,0.71,0.03,-0.02,-0.69\n".to_vec());
     Ok(vec![
+        Target {
+            id: "calibration",
+            what: "calibration files (camchain.yaml, sensor.yaml, calibration.json, calib.txt)",
+            seeds: calibrations,
+            text: true,
+            run: run_calibration,
+        },
+        Target {
+            id: "listing",
+            what: "data.csv, exposure.csv, rgb.txt",
+            seeds: listings,
+            text: true,
+            run: run_listing,
+        },
+        Target {
+            id: "dataset-truth",
+            what: "ground truth of EuRoC, TUM-VI, 4Seasons, KITTI, TUM",
+            seeds: truths,
+            text: true,
+            run: run_dataset_truth,
+        },
         Target {
             id: "camera",
             what: "camera.txt",

@@ -181,9 +181,9 @@ fn rows_from_ns(
     })
 }
 
-/// `data.csv` of an ASL camera: `#timestamp [ns],filename` then `ns,name.png`.
-fn asl_data_csv(path: &Path) -> Result<Vec<(i64, String, usize)>, DatasetError> {
-    let text = read_text(path)?;
+/// `data.csv` of an ASL camera: `#timestamp [ns],filename` then `ns,name.png`; returns the
+/// nanoseconds, image name and 1-based line of each row (`path` names the file in errors).
+pub fn parse_data_csv(text: &str, path: &Path) -> Result<Vec<(i64, String, usize)>, DatasetError> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let t = line.trim().trim_start_matches('\u{feff}');
@@ -207,9 +207,12 @@ fn asl_data_csv(path: &Path) -> Result<Vec<(i64, String, usize)>, DatasetError> 
     Ok(out)
 }
 
-/// Basalt's `exposure.csv`: `#timestamp [ns],exposure [ns]` per frame.
-fn exposure_csv(path: &Path) -> Result<std::collections::HashMap<i64, f64>, DatasetError> {
-    let text = read_text(path)?;
+/// Basalt's `exposure.csv`: `#timestamp [ns],exposure [ns]` per frame; returns the exposure
+/// in ms of each nanosecond stamp (`path` names the file in errors).
+pub fn parse_exposure_csv(
+    text: &str,
+    path: &Path,
+) -> Result<std::collections::HashMap<i64, f64>, DatasetError> {
     let mut out = std::collections::HashMap::new();
     for (i, line) in text.lines().enumerate() {
         let t = line.trim();
@@ -245,9 +248,9 @@ fn asl(root: &Path, mav0: &Path, cam: usize) -> Result<Listed, DatasetError> {
             format!("--cam {cam}: no data.csv (EuRoC/ASL layout: mav0/camN/data.csv and data/)"),
         ));
     }
-    let listed = asl_data_csv(&csv)?;
+    let listed = parse_data_csv(&read_text(&csv)?, &csv)?;
     let exposures = match first_file([camdir.join("exposure.csv"), mav0.join("exposure.csv")]) {
-        Some(p) => Some((exposure_csv(&p)?, p)),
+        Some(p) => Some((parse_exposure_csv(&read_text(&p)?, &p)?, p)),
         None => None,
     };
     let mut warnings = Vec::new();
@@ -459,30 +462,11 @@ fn kitti(dir: &Path, cam: usize) -> Result<Listed, DatasetError> {
 /// `calibration.txt` (`fx fy cx cy`), `groundtruth.txt`.
 fn tum_rgbd(dir: &Path) -> Result<Listed, DatasetError> {
     let list = dir.join("rgb.txt");
-    let text = read_text(&list)?;
-    let mut stamps = Vec::new();
-    let mut lines = Vec::new();
-    let mut files = Vec::new();
-    let mut names = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let t = line.trim();
-        if t.is_empty() || t.starts_with('#') {
-            continue;
-        }
-        let expected = "`timestamp_s filename` (seconds, a relative image path)";
-        let mut f = t.split_whitespace();
-        let (Some(ts), Some(name)) = (f.next(), f.next()) else {
-            return Err(parse_err(&list, i + 1, expected, t));
-        };
-        let ns = seconds_to_ns(ts).ok_or_else(|| parse_err(&list, i + 1, expected, t))?;
-        if name.starts_with('/') || name.split('/').any(|c| c == "..") {
-            return Err(parse_err(&list, i + 1, expected, t));
-        }
-        stamps.push((ns, None));
-        lines.push(i + 1);
-        files.push(dir.join(name));
-        names.push(name.to_string());
-    }
+    let rows = parse_rgb_list(&read_text(&list)?, &list)?;
+    let stamps: Vec<(i64, Option<f64>)> = rows.iter().map(|r| (r.0, None)).collect();
+    let lines: Vec<usize> = rows.iter().map(|r| r.2).collect();
+    let files: Vec<PathBuf> = rows.iter().map(|r| dir.join(&r.1)).collect();
+    let names: Vec<String> = rows.iter().map(|r| r.1.clone()).collect();
     if files.is_empty() {
         return Err(DatasetError::invalid(&list, "lists no image"));
     }
@@ -500,4 +484,28 @@ fn tum_rgbd(dir: &Path) -> Result<Listed, DatasetError> {
         ground_truth: file(dir.join("groundtruth.txt")),
         warnings: Vec::new(),
     })
+}
+
+/// TUM RGB-D's `rgb.txt`: `timestamp_s relative/path.png` lines, `#` comments; returns the
+/// nanoseconds, path and 1-based line of each (`path` names the file in errors).
+pub fn parse_rgb_list(text: &str, path: &Path) -> Result<Vec<(i64, String, usize)>, DatasetError> {
+    let list = path;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        let expected = "`timestamp_s filename` (seconds, a relative image path)";
+        let mut f = t.split_whitespace();
+        let (Some(ts), Some(name)) = (f.next(), f.next()) else {
+            return Err(parse_err(list, i + 1, expected, t));
+        };
+        let ns = seconds_to_ns(ts).ok_or_else(|| parse_err(list, i + 1, expected, t))?;
+        if name.starts_with('/') || name.split('/').any(|c| c == "..") {
+            return Err(parse_err(list, i + 1, expected, t));
+        }
+        out.push((ns, name.to_string(), i + 1));
+    }
+    Ok(out)
 }

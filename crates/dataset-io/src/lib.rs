@@ -43,7 +43,7 @@ mod zipimages;
 
 pub use atomic::{check_output_file, read_text, scratch_file, write_atomic, write_atomic_with};
 pub use error::DatasetError;
-pub use layouts::Layout;
+pub use layouts::{parse_data_csv, parse_exposure_csv, parse_rgb_list, Layout};
 pub use outdir::OutputDir;
 pub use png::{
     encode_jpeg_gray, encode_png_u16, encode_png_u8, read_png_text, write_png_u16,
