@@ -142,3 +142,48 @@ fn broken_files_name_the_line() {
         .to_string();
     assert!(e.contains("line 1") && e.contains("12 numbers"), "{e}");
 }
+
+/// The same 3D points through the same real calibrations as OpenCV projects them
+/// (xtask/peers/opencv_models.py: cv2.projectPoints for RadTan, cv2.fisheye for EquiDistant and
+/// Kannala-Brandt, cv2.omnidir for the unified omni model with radtan; versions in the file).
+/// Tolerance 1e-6 px: both evaluate the same closed-form projection in f64.
+#[test]
+fn projections_match_opencv() {
+    let v: serde_json::Value =
+        serde_json::from_str(&fixture("peers/opencv_projections.json")).unwrap();
+    let mut worst: std::collections::BTreeMap<String, f64> = Default::default();
+    for c in v["cases"].as_array().unwrap() {
+        let file = read(c["file"].as_str().unwrap());
+        let cam = c["cam"].as_u64().unwrap() as usize;
+        let model = &file.cameras[cam].model;
+        assert_eq!(model.name(), c["model"].as_str().unwrap());
+        let pts = c["points"].as_array().unwrap();
+        let pxs = c["pixels"].as_array().unwrap();
+        for (p, want) in pts.iter().zip(pxs) {
+            let p: Vec<f64> = p
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            let want: Vec<f64> = want
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            let got = model.project([p[0], p[1], p[2]]).unwrap();
+            let err = (got[0] - want[0]).hypot(got[1] - want[1]);
+            let w = worst.entry(model.name().to_string()).or_default();
+            *w = w.max(err);
+        }
+    }
+    eprintln!(
+        "largest difference from OpenCV {}, px: {worst:?}",
+        v["opencv"]
+    );
+    assert_eq!(worst.len(), 4);
+    for (m, e) in worst {
+        assert!(e < 1e-6, "{m}: {e} px");
+    }
+}
