@@ -587,6 +587,14 @@ impl Sequence {
         &self.dir
     }
 
+    /// The folder of the image files (of the first one), `None` for images.zip.
+    pub fn image_folder(&self) -> Option<&Path> {
+        match &self.source {
+            Source::Zip { .. } => None,
+            Source::Folder { files } => files.first().and_then(|f| f.parent()),
+        }
+    }
+
     /// The layout the folder was read as.
     pub fn layout(&self) -> Layout {
         self.layout

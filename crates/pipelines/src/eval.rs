@@ -87,7 +87,11 @@ pub fn load_ground_truth(path: &Path) -> Result<GroundTruth> {
 /// ground-truth poses at most 3 of their median intervals apart (NaN elsewhere), as
 /// groundtruthSync.txt is.
 pub fn load_sequence_ground_truth(dir: &Path, cam: usize) -> Result<GroundTruth> {
-    let seq = dataset_io::Sequence::open_camera(dir, cam)?;
+    let seq =
+        dataset_io::Sequence::open_camera(dir, cam).map_err(|source| PipelineError::Read {
+            what: "the ground truth's sequence folder",
+            source,
+        })?;
     if let Some(p) = &seq.ground_truth_path {
         return load_ground_truth(p);
     }

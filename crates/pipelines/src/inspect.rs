@@ -207,13 +207,12 @@ pub fn inspect_sequence(
     };
     let frames_failed = frame_problems.len();
     problems.extend(frame_problems);
-    let images = if seq.is_zipped() {
-        "images.zip".to_string()
-    } else if seq.layout() == dataset_io::Layout::Monovo {
-        "images/".to_string()
-    } else {
-        let first = seq.names().first().cloned().unwrap_or_default();
-        format!("{} ({} ... )", seq.layout().name(), first)
+    let images = match seq.image_folder() {
+        None => "images.zip".to_string(),
+        Some(f) => {
+            let rel = f.strip_prefix(dir).unwrap_or(f);
+            format!("{}/", rel.display())
+        }
     };
     let timestamps_ns = seq
         .timestamps_ns()
