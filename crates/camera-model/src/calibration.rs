@@ -732,55 +732,54 @@ fn parse_basalt(text: &str) -> Result<CalibrationFile, CameraError> {
             cx: get("cx")?,
             cy: get("cy")?,
         };
-        let model = match cam.camera_type.as_str() {
-            "pinhole" => CameraModel::Pinhole(k),
-            "kb4" => CameraModel::KannalaBrandt {
-                k,
-                coeffs: [get("k1")?, get("k2")?, get("k3")?, get("k4")?],
-            },
-            "ds" => CameraModel::DoubleSphere {
-                k,
-                xi: get("xi")?,
-                alpha: get("alpha")?,
-            },
-            "eucm" => CameraModel::Eucm {
-                k,
-                alpha: get("alpha")?,
-                beta: get("beta")?,
-            },
-            "ucm" => {
-                // Basalt's UCM: m = (x, y) / (alpha d + (1 - alpha) z), the unified model
-                // with xi = alpha / (1 - alpha) and focal lengths f / (1 - alpha)
-                let alpha = get("alpha")?;
-                if !(0.0..1.0).contains(&alpha) {
-                    return Err(CameraError::InvalidValue {
-                        line,
-                        message: format!("UCM needs alpha in [0, 1), got {alpha}"),
-                    });
+        let model =
+            match cam.camera_type.as_str() {
+                "pinhole" => CameraModel::Pinhole(k),
+                "kb4" => CameraModel::KannalaBrandt {
+                    k,
+                    coeffs: [get("k1")?, get("k2")?, get("k3")?, get("k4")?],
+                },
+                "ds" => CameraModel::DoubleSphere {
+                    k,
+                    xi: get("xi")?,
+                    alpha: get("alpha")?,
+                },
+                "eucm" => CameraModel::Eucm {
+                    k,
+                    alpha: get("alpha")?,
+                    beta: get("beta")?,
+                },
+                "ucm" => {
+                    // Basalt's UCM: m = (x, y) / (alpha d + (1 - alpha) z), the unified model
+                    // with xi = alpha / (1 - alpha) and focal lengths f / (1 - alpha)
+                    let alpha = get("alpha")?;
+                    if !(0.0..1.0).contains(&alpha) {
+                        return Err(CameraError::InvalidValue {
+                            line,
+                            message: format!("UCM needs alpha in [0, 1), got {alpha}"),
+                        });
+                    }
+                    let s = 1.0 / (1.0 - alpha);
+                    CameraModel::Unified {
+                        k: Intrinsics {
+                            fx: k.fx * s,
+                            fy: k.fy * s,
+                            ..k
+                        },
+                        xi: alpha * s,
+                        coeffs: [0.0; 4],
+                    }
                 }
-                let s = 1.0 / (1.0 - alpha);
-                CameraModel::Unified {
-                    k: Intrinsics {
-                        fx: k.fx * s,
-                        fy: k.fy * s,
-                        ..k
-                    },
-                    xi: alpha * s,
-                    coeffs: [0.0; 4],
-                }
-            }
-            "fov" => CameraModel::Fov {
-                k,
-                omega: get("w")?,
-            },
-            other => {
-                return Err(parse_err(
+                "fov" => CameraModel::Fov {
+                    k,
+                    omega: get("w")?,
+                },
+                other => return Err(parse_err(
                     line,
-                    "camera_type `pinhole`, `kb4`, `ds`, `eucm`, `ucm` or `fov`",
+                    "camera_type `pinhole`, `kb4`, `ds`, `eucm`, `ucm`, `fov` or `pinhole-radtan8`",
                     other,
-                ))
-            }
-        };
+                )),
+            };
         if let Some(message) = model.parameter_problem() {
             return Err(CameraError::InvalidValue { line, message });
         }

@@ -213,6 +213,14 @@ fn tum_vi_dso_and_mav0() {
         "calib/basalt__tumvi_512_ds_calib.json",
         &m.join("calibration.json"),
     );
+    // a sensor.yaml with only the extrinsics is no camera: the calibration.json beside mav0 is
+    std::fs::write(
+        m.join("mav0/cam0/sensor.yaml"),
+        "sensor_type: camera\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]\n",
+    )
+    .unwrap();
+    let named = info(&m.join("mav0"), &[]);
+    assert_eq!(named["camera"]["model"], "DoubleSphere");
     let v = info(&m, &[]);
     assert_eq!(v["layout"], "euroc-asl");
     assert_eq!(v["camera"]["model"], "DoubleSphere");

@@ -278,14 +278,29 @@ fn asl(root: &Path, mav0: &Path, cam: usize) -> Result<Listed, DatasetError> {
     }
     let ids: Vec<String> = listed.iter().map(|(ns, _, _)| ns.to_string()).collect();
     let times = rows_from_ns(&stamps, &ids, &csv, &lines)?;
-    let calibration = first_file([
-        camdir.join("sensor.yaml"),
-        root.join("dso/camchain.yaml"),
-        root.join("camchain.yaml"),
-        root.join("calibration.json"),
-        root.join("calib.json"),
-    ]);
-    let dso = root.join("dso").join(format!("cam{cam}"));
+    // a sensor.yaml without intrinsics (only T_BS, as some recordings have) is no camera
+    let sensor = camdir.join("sensor.yaml");
+    let sensor_has_camera = std::fs::read_to_string(&sensor)
+        .is_ok_and(|t| t.lines().any(|l| l.starts_with("intrinsics:")));
+    let mut candidates = Vec::new();
+    if sensor_has_camera {
+        candidates.push(sensor);
+    }
+    // beside mav0: the folder named, or mav0's parent when mav0 itself was named
+    let roots = [root.to_path_buf(), mav0.join("..")];
+    for r in &roots {
+        candidates.extend([
+            r.join("dso/camchain.yaml"),
+            r.join("camchain.yaml"),
+            r.join("calibration.json"),
+            r.join("calib.json"),
+        ]);
+    }
+    let calibration = first_file(candidates);
+    let dso = match roots.iter().find(|r| r.join("dso").is_dir()) {
+        Some(r) => r.join("dso").join(format!("cam{cam}")),
+        None => root.join("dso").join(format!("cam{cam}")),
+    };
     Ok(Listed {
         layout: Layout::Asl,
         files,
