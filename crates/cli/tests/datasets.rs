@@ -487,3 +487,44 @@ fn eval_reads_euroc_ground_truth_at_the_frames() {
     let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert!(v["e_rmse"].as_f64().unwrap() > 1e-3, "{v}");
 }
+
+/// Basalt's EUCM (EuRoC) and kb4 (T265) calibrations beside an ASL folder.
+#[test]
+fn basalt_eucm_and_kb4_in_asl_folders() {
+    for (name, calib, rel, out) in [
+        (
+            "datasets_eucm",
+            "calib/basalt__euroc_eucm_calib.json",
+            [0.5, 0.6, 0.5, 0.5],
+            ImageSize::new(376, 240),
+        ),
+        (
+            "datasets_kb4",
+            "calib/basalt__t265_kb4_calib.json",
+            [0.3, 0.3, 0.5, 0.5],
+            ImageSize::new(212, 200),
+        ),
+    ] {
+        let root = temp_dir(name);
+        let (model, size) = camera_of(calib, 1);
+        std::fs::create_dir_all(root.join("mav0/cam1/data")).unwrap();
+        std::fs::write(
+            root.join("mav0/cam1/data.csv"),
+            "#timestamp [ns],filename\n1000,a.png\n2000,b.png\n",
+        )
+        .unwrap();
+        let frame = render(&model, size, 1.0);
+        for n in ["a", "b"] {
+            write_png(
+                &root.join(format!("mav0/cam1/data/{n}.png")),
+                size,
+                &frame,
+                false,
+            );
+        }
+        copy(calib, &root.join("calibration.json"));
+        let v = info(&root, &["--cam", "1"]);
+        assert_eq!(v["camera"]["model"], model.name());
+        rectify_matches_scene(&root, &["--cam", "1"], rel, out);
+    }
+}
