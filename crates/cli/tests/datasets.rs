@@ -198,6 +198,14 @@ fn tum_vi_dso_and_mav0() {
     assert!(out.contains("1520530308.199447626 1.462315"), "{out}");
     let rect = dataset_io::Sequence::open(&root.with_extension("rect")).unwrap();
     assert_eq!(rect.bits_per_sample(), 16, "16-bit frames stay 16-bit");
+    // --calib reads another calibration file for the same frames
+    let ds = fixture("calib/basalt__tumvi_512_ds_calib.json");
+    let v = info(&root, &["--cam", "1", "--calib", ds.to_str().unwrap()]);
+    assert_eq!(v["camera"]["model"], "DoubleSphere");
+    assert_eq!(
+        v["camera"]["input"]["cx"].as_f64(),
+        Some(252.56547609702953)
+    );
 
     // mav0 layout with Basalt's Double Sphere calibration beside it
     let m = temp_dir("datasets_tumvi_mav0");

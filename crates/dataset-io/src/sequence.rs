@@ -375,6 +375,24 @@ impl Sequence {
     /// input size must match the images), TUM-VI, EuRoC/ASL, 4Seasons, KITTI or TUM RGB-D /
     /// ETH3D, each with its own calibration file.
     pub fn open_camera(dir: &Path, cam: usize) -> Result<Sequence, DatasetError> {
+        Sequence::open_with_calibration(dir, cam, None)
+    }
+
+    /// As [`Sequence::open_camera`], with the camera read from `calibration` (any format of
+    /// [`CalibrationFile`]) instead of the layout's own file, when given (`--calib FILE`).
+    pub fn open_with_calibration(
+        dir: &Path,
+        cam: usize,
+        calibration: Option<&Path>,
+    ) -> Result<Sequence, DatasetError> {
+        let mut seq = Sequence::open_layout(dir, cam)?;
+        if let Some(p) = calibration {
+            seq.set_calibration(p, cam)?;
+        }
+        Ok(seq)
+    }
+
+    fn open_layout(dir: &Path, cam: usize) -> Result<Sequence, DatasetError> {
         if !dir.exists() {
             return Err(DatasetError::invalid(dir, "does not exist"));
         }
@@ -406,6 +424,35 @@ impl Sequence {
         }
     }
 
+    /// Reads the camera of calibration file `p` (camera `cam` of a multi-camera file; a
+    /// one-camera file serves every camera) for images of this sequence's size.
+    fn set_calibration(&mut self, p: &Path, cam: usize) -> Result<(), DatasetError> {
+        let cal = CalibrationFile::parse(&read_text(p)?)
+            .map_err(|e| DatasetError::invalid(p, e.to_string()))?;
+        let index = match cal.format {
+            CalibrationFormat::EurocSensor
+            | CalibrationFormat::CameraTxt
+            | CalibrationFormat::Eth3d => 0,
+            _ => cam,
+        };
+        let file = cal
+            .camera_file(index, Some(self.size))
+            .map_err(|e| DatasetError::invalid(p, e.to_string()))?;
+        if file.input_size != self.size {
+            return Err(DatasetError::invalid(
+                p,
+                format!(
+                    "the camera is {} but the images are {} ({})",
+                    file.input_size, self.size, self.names[0]
+                ),
+            ));
+        }
+        self.camera_from_imu = cal.cameras.get(index).and_then(|c| c.camera_from_imu);
+        self.camera = Some(file);
+        self.camera_path = Some(p.to_path_buf());
+        Ok(())
+    }
+
     /// A listed layout: the images, their rows, and the calibration file read for `cam`.
     fn open_listed(dir: &Path, l: Listed, cam: usize) -> Result<Sequence, DatasetError> {
         let mut seq = Sequence {
@@ -434,30 +481,7 @@ impl Sequence {
         seq.size = ImageSize::new(fw, fh);
         seq.bits = first.bits();
         if let Some(p) = l.calibration {
-            let cal = CalibrationFile::parse(&read_text(&p)?)
-                .map_err(|e| DatasetError::invalid(&p, e.to_string()))?;
-            // files of one camera (sensor.yaml, camera.txt, ETH3D's) serve every --cam
-            let index = match cal.format {
-                CalibrationFormat::EurocSensor
-                | CalibrationFormat::CameraTxt
-                | CalibrationFormat::Eth3d => 0,
-                _ => cam,
-            };
-            let file = cal
-                .camera_file(index, Some(seq.size))
-                .map_err(|e| DatasetError::invalid(&p, e.to_string()))?;
-            if file.input_size != seq.size {
-                return Err(DatasetError::invalid(
-                    &p,
-                    format!(
-                        "the camera is {} but the images are {} ({})",
-                        file.input_size, seq.size, seq.names[0]
-                    ),
-                ));
-            }
-            seq.camera_from_imu = cal.cameras.get(index).and_then(|c| c.camera_from_imu);
-            seq.camera = Some(file);
-            seq.camera_path = Some(p);
+            seq.set_calibration(&p, cam)?;
         }
         Ok(seq)
     }

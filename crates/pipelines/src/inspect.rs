@@ -102,16 +102,17 @@ fn check_frames(seq: &Sequence, observer: &dyn Observer) -> Vec<String> {
     problems
 }
 
-/// Opens and checks a sequence folder of any layout, camera `cam` (every frame decoded unless
-/// `quick`). Only a folder that cannot be opened at all is an error; everything else is a
+/// Opens and checks a sequence folder of any layout, camera `cam`, with the layout's own
+/// calibration or `calibration` (every frame decoded unless `quick`). Only a folder that cannot be opened at all is an error; everything else is a
 /// problem in the report.
 pub fn inspect_sequence(
     dir: &Path,
     cam: usize,
+    calibration: Option<&Path>,
     quick: bool,
     observer: &dyn Observer,
 ) -> Result<SequenceInfo> {
-    let seq = Sequence::open_camera(dir, cam)?;
+    let seq = Sequence::open_with_calibration(dir, cam, calibration)?;
     let rows = &seq.times().rows;
     let n = seq.len();
     let duration_s = match (rows.first(), rows.last()) {

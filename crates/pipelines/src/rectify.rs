@@ -52,6 +52,8 @@ pub struct RectifyJob {
     pub depth: Option<u8>,
     /// The camera of a multi-camera dataset (`--cam N`, TUM-VI, EuRoC, 4Seasons, KITTI).
     pub cam: usize,
+    /// A calibration file to use instead of the layout's own (`--calib FILE`).
+    pub calibration: Option<PathBuf>,
     /// Write the frames into images.zip instead of images/.
     pub zip: bool,
     /// How the PNG frames are compressed.
@@ -84,6 +86,7 @@ impl RectifyJob {
             range: None,
             depth: None,
             cam: 0,
+            calibration: None,
             zip: false,
             compression: FrameCompression::Fast,
             force: false,
@@ -367,7 +370,8 @@ pub fn rectify_sequence(args: &RectifyJob, observer: &dyn Observer) -> Result<Re
             )));
         }
     }
-    let seq = Sequence::open_camera(&args.sequence, args.cam)?;
+    let seq =
+        Sequence::open_with_calibration(&args.sequence, args.cam, args.calibration.as_deref())?;
     for w in seq.times().warnings.iter().chain(&seq.layout_warnings) {
         observer.warn(w);
     }

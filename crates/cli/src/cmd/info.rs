@@ -41,11 +41,21 @@ pub struct Args {
     /// The camera of a multi-camera dataset (TUM-VI, EuRoC, 4Seasons, KITTI): camN, image_N.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub cam: usize,
+    /// A calibration file to use instead of the folder's own (any format `monovo camera`
+    /// reads).
+    #[arg(long = "calib", value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
 }
 
 /// Runs `monovo info`.
 pub fn run(args: &Args) -> Result<()> {
-    let info = inspect_sequence(&args.sequence, args.cam, args.quick, &Bars::default())?;
+    let info = inspect_sequence(
+        &args.sequence,
+        args.cam,
+        args.calibration.as_deref(),
+        args.quick,
+        &Bars::default(),
+    )?;
     if args.json {
         outln!("{}", info.json())?;
     } else {

@@ -48,6 +48,11 @@ pub struct Args {
     /// The camera of a multi-camera dataset (TUM-VI, EuRoC, 4Seasons, KITTI): camN, image_N.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub cam: usize,
+    /// A calibration file to use instead of the folder's own: camera.txt, Kalibr
+    /// camchain.yaml, EuRoC sensor.yaml, Basalt calibration.json, KITTI calib.txt, ETH3D
+    /// calibration.txt (its camera --cam N where it has several).
+    #[arg(long = "calib", value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
     /// Write the frames into images.zip instead of images/.
     #[arg(long)]
     pub zip: bool,
@@ -140,6 +145,7 @@ impl Args {
             range: self.range.clone(),
             depth: self.depth,
             cam: self.cam,
+            calibration: self.calibration.clone(),
             zip: self.zip,
             compression: self.compression,
             force: self.force,
