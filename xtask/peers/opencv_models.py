@@ -84,7 +84,7 @@ def main():
         "numpy": np.__version__,
         "python": sys.version.split()[0],
         "cases": cases,
-    }, sys.stdout, indent=1)
+    }, sys.stdout, separators=(",", ":"))
     print()
 
 
