@@ -691,6 +691,78 @@ fn pose_matrix(p: &BasaltPose) -> Option<Transform> {
     ])
 }
 
+/// One camera of Basalt's `intrinsics` list as a model (`line`: its `camera_type` line).
+fn basalt_model(cam: &BasaltIntrinsics, line: usize) -> Result<CameraModel, CameraError> {
+    let get = |key: &str| -> Result<f64, CameraError> {
+        cam.intrinsics.get(key).copied().ok_or_else(|| {
+            parse_err(
+                line,
+                format!(
+                    "`{key}` in the intrinsics of a `{}` camera",
+                    cam.camera_type
+                ),
+                "nothing",
+            )
+        })
+    };
+    let k = Intrinsics {
+        fx: get("fx")?,
+        fy: get("fy")?,
+        cx: get("cx")?,
+        cy: get("cy")?,
+    };
+    let model = match cam.camera_type.as_str() {
+        "pinhole" => CameraModel::Pinhole(k),
+        "kb4" => CameraModel::KannalaBrandt {
+            k,
+            coeffs: [get("k1")?, get("k2")?, get("k3")?, get("k4")?],
+        },
+        "ds" => CameraModel::DoubleSphere {
+            k,
+            xi: get("xi")?,
+            alpha: get("alpha")?,
+        },
+        "eucm" => CameraModel::Eucm {
+            k,
+            alpha: get("alpha")?,
+            beta: get("beta")?,
+        },
+        "ucm" => {
+            // Basalt's UCM: m = (x, y) / (alpha d + (1 - alpha) z), the unified model
+            // with xi = alpha / (1 - alpha) and focal lengths f / (1 - alpha)
+            let alpha = get("alpha")?;
+            if !(0.0..1.0).contains(&alpha) {
+                return Err(CameraError::InvalidValue {
+                    line,
+                    message: format!("UCM needs alpha in [0, 1), got {alpha}"),
+                });
+            }
+            let s = 1.0 / (1.0 - alpha);
+            CameraModel::Unified {
+                k: Intrinsics {
+                    fx: k.fx * s,
+                    fy: k.fy * s,
+                    ..k
+                },
+                xi: alpha * s,
+                coeffs: [0.0; 4],
+            }
+        }
+        "fov" => CameraModel::Fov {
+            k,
+            omega: get("w")?,
+        },
+        other => {
+            return Err(parse_err(
+                line,
+                "camera_type `pinhole`, `kb4`, `ds`, `eucm`, `ucm`, `fov` or `pinhole-radtan8`",
+                other,
+            ))
+        }
+    };
+    Ok(model)
+}
+
 /// Basalt's calibration.json: `value0.intrinsics[i]` with `camera_type` `pinhole`, `kb4`,
 /// `ds`, `eucm`, `ucm` or `fov`, `value0.resolution[i]`, `value0.T_imu_cam[i]`.
 fn parse_basalt(text: &str) -> Result<CalibrationFile, CameraError> {
@@ -714,72 +786,7 @@ fn parse_basalt(text: &str) -> Result<CalibrationFile, CameraError> {
     let mut cameras = Vec::new();
     for (i, cam) in c.intrinsics.iter().enumerate() {
         let line = at(i);
-        let get = |key: &str| -> Result<f64, CameraError> {
-            cam.intrinsics.get(key).copied().ok_or_else(|| {
-                parse_err(
-                    line,
-                    format!(
-                        "`{key}` in the intrinsics of a `{}` camera",
-                        cam.camera_type
-                    ),
-                    "nothing",
-                )
-            })
-        };
-        let k = Intrinsics {
-            fx: get("fx")?,
-            fy: get("fy")?,
-            cx: get("cx")?,
-            cy: get("cy")?,
-        };
-        let model =
-            match cam.camera_type.as_str() {
-                "pinhole" => CameraModel::Pinhole(k),
-                "kb4" => CameraModel::KannalaBrandt {
-                    k,
-                    coeffs: [get("k1")?, get("k2")?, get("k3")?, get("k4")?],
-                },
-                "ds" => CameraModel::DoubleSphere {
-                    k,
-                    xi: get("xi")?,
-                    alpha: get("alpha")?,
-                },
-                "eucm" => CameraModel::Eucm {
-                    k,
-                    alpha: get("alpha")?,
-                    beta: get("beta")?,
-                },
-                "ucm" => {
-                    // Basalt's UCM: m = (x, y) / (alpha d + (1 - alpha) z), the unified model
-                    // with xi = alpha / (1 - alpha) and focal lengths f / (1 - alpha)
-                    let alpha = get("alpha")?;
-                    if !(0.0..1.0).contains(&alpha) {
-                        return Err(CameraError::InvalidValue {
-                            line,
-                            message: format!("UCM needs alpha in [0, 1), got {alpha}"),
-                        });
-                    }
-                    let s = 1.0 / (1.0 - alpha);
-                    CameraModel::Unified {
-                        k: Intrinsics {
-                            fx: k.fx * s,
-                            fy: k.fy * s,
-                            ..k
-                        },
-                        xi: alpha * s,
-                        coeffs: [0.0; 4],
-                    }
-                }
-                "fov" => CameraModel::Fov {
-                    k,
-                    omega: get("w")?,
-                },
-                other => return Err(parse_err(
-                    line,
-                    "camera_type `pinhole`, `kb4`, `ds`, `eucm`, `ucm`, `fov` or `pinhole-radtan8`",
-                    other,
-                )),
-            };
+        let model = basalt_model(cam, line)?;
         if let Some(message) = model.parameter_problem() {
             return Err(CameraError::InvalidValue { line, message });
         }
