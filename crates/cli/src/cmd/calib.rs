@@ -133,14 +133,6 @@ pub struct ResponseArgs {
         "auto",
     ))]
     pub weighting: Option<photometric::Weighting>,
-    /// How U is fitted: auto, grey or energy.
-    #[arg(long, value_name = "HOW", value_parser = parse_estimator, help = with_default(
-        "How U is fitted: grey (maximum likelihood of the recorded grey values), energy \
-         (U(k) the mean energy of the values k, with the irradiances from the grey values), \
-         or auto: whichever predicts held-out exposures best",
-        "auto",
-    ))]
-    pub estimator: Option<photometric::EstimatorChoice>,
     /// Residuals beyond this many standard deviations pull with bounded force (Huber).
     #[arg(long, value_name = "SIGMAS", help = with_default(
         "Residuals beyond this many noise standard deviations pull with bounded force (Huber)",
@@ -156,7 +148,7 @@ pub struct ResponseArgs {
     pub target_std_error: Option<f64>,
     /// Most pixels drawn (0: no limit).
     #[arg(long, value_name = "N", help = with_default(
-        "Most pixels drawn (0: no limit)",
+        "Most pixels drawn (0: all if the standard errors need them)",
         ResponseOptions::default().max_pixels,
     ))]
     pub max_pixels: Option<usize>,
@@ -249,16 +241,6 @@ fn parse_weighting(s: &str) -> Result<photometric::Weighting, String> {
     }
 }
 
-/// `--estimator`'s values.
-fn parse_estimator(s: &str) -> Result<photometric::EstimatorChoice, String> {
-    match s {
-        "auto" => Ok(photometric::EstimatorChoice::Auto),
-        "grey" => Ok(photometric::EstimatorChoice::Grey),
-        "energy" => Ok(photometric::EstimatorChoice::Energy),
-        other => Err(format!("`{other}`: expected auto, grey or energy")),
-    }
-}
-
 /// A flag's help with the default it takes when neither the flag nor `--config` sets it.
 fn with_default(text: &str, default: impl std::fmt::Display) -> String {
     format!("{text} [default: {default}, or from --config]")
@@ -279,9 +261,6 @@ pub fn response_options(a: &ResponseArgs) -> Result<ResponseOptions> {
     }
     if let Some(v) = a.weighting {
         o.weighting = v;
-    }
-    if let Some(v) = a.estimator {
-        o.estimator = v;
     }
     if let Some(v) = a.huber {
         o.huber = v;
@@ -387,8 +366,8 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "observed_max": cal.observed_range.1,
                 "filled": cal.filled,
                 "weighting": cal.weighting,
-                "estimator": cal.estimator,
                 "held_out": cal.held_out,
+                "prior_scale": cal.prior_scale,
                 "measured_noise": cal.measured_noise,
                 "noise": cal.noise,
                 "prior_weight": cal.prior_weight,
@@ -432,22 +411,29 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     Ok(())
 }
 
-/// The fit used, and the held-out check that chose it.
+/// The weights and prior used, and the held-out check that chose them.
 fn weighting_line(cal: &photometric::ResponseCalibration) -> String {
     let what = format!(
-        "{} estimator, {} weights",
-        cal.estimator.name(),
+        "{} weights, prior x{}",
         match cal.weighting {
             photometric::Weighting::Uniform => "uniform",
             _ => "measured-noise",
-        }
+        },
+        cal.prior_scale
     );
     match &cal.held_out {
         Some(h) => {
             let scores: Vec<String> = h
                 .candidates
                 .iter()
-                .map(|c| format!("{} {} {:.3}", c.estimator, c.weighting, c.rms))
+                .map(|c| {
+                    format!(
+                        "{} x{} {:.3}",
+                        if c.measured { "measured" } else { "uniform" },
+                        c.prior_scale,
+                        c.rms
+                    )
+                })
                 .collect();
             format!(
                 "fit: {what}, chosen by predicting held-out exposures ({} folds, {} pixels; RMS error in grey values: {})",

@@ -215,8 +215,9 @@ pub(super) fn measure(
 mod tests {
     use super::*;
 
-    /// Gaussian residuals of a known standard deviation per bin, with 10% gross outliers: the
-    /// measured variance is within 5% of the truth away from the clips.
+    /// Gaussian residuals of a known standard deviation per bin, with 5% gross outliers: the
+    /// measured variance is within 15% of the truth away from the clips (the outliers widen
+    /// the median by about 7%).
     #[test]
     fn measures_the_variance_robustly() {
         let knots = 256;
@@ -232,7 +233,7 @@ mod tests {
         for i in 0..400_000 {
             let mu = (i % 255) as f64 + 0.5;
             let g = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
-            let r = if i % 10 == 0 {
+            let r = if i % 20 == 0 {
                 50.0 * (uniform() - 0.5)
             } else {
                 g * sd_at(mu)
@@ -243,7 +244,6 @@ mod tests {
         for k in [40usize, 100, 200] {
             let want = sd_at(k as f64).powi(2);
             let got = m.per_knot[k];
-            // the outliers widen the median a little (10% contamination: about 8%)
             assert!((got / want - 1.0).abs() < 0.15, "{k}: {got} {want}");
         }
     }

@@ -50,14 +50,12 @@ use camera_model::Image;
 
 pub use model::Weighting;
 pub use select::{CandidateScore, HeldOutScores};
-pub use solver::Estimator;
 
 use crate::noise::{fit_noise, NoiseModel};
 use crate::{InverseResponse, PhotometricError};
 use measured::Measured;
 use prior::{data_range, extrapolate};
 use samples::{draw, scan, Levels, Sample, Samples};
-use select::Candidate;
 use solver::{solve, Fit, Problem, Settings, Start};
 use uncertainty::{normalized, standard_errors};
 
@@ -84,22 +82,27 @@ pub struct ResponseOptions {
     /// Radius (pixels) of the neighbourhood of a saturated pixel whose observations are
     /// dropped.
     pub saturation_border: usize,
+    /// For JPEG frames, 8: the observations in a block (aligned, of this side) with a
+    /// saturated pixel are dropped too (each block is coded on its own, and a clipped pixel
+    /// rings through it). 0 or 1: none.
+    pub saturation_block: usize,
     /// Grey values with fewer observations count as not determined by the data.
     pub min_count: u64,
-    /// How observations are weighted: `auto` (whichever predicts held-out exposures best),
-    /// `measured` (by the noise measured from the residuals) or `uniform`.
+    /// How observations are weighted: `auto` (by the measured noise unless uniform weights
+    /// predict held-out exposures better), `measured` (by the noise measured from the
+    /// residuals) or `uniform`.
     pub weighting: Weighting,
-    /// How `U` is fitted: `auto` (whichever predicts held-out exposures best), `grey`
-    /// (maximum likelihood of the recorded values) or `energy` (`U(k)` the mean energy of
-    /// the values `k`, with unbiased irradiances).
-    pub estimator: EstimatorChoice,
+    /// Let the held-out check also try a 10 and a 100 times weaker prior (taken only when it
+    /// predicts held-out exposures clearly better: real cameras' curves have features the
+    /// prior the exposures' ripples need would smooth away).
+    pub choose_prior: bool,
     /// Residuals beyond this many noise standard deviations pull with bounded force (Huber).
     pub huber: f64,
     /// The pixel sample grows until the RMS sampling standard error of the determined
     /// `U(k)` is below this many grey values (on the `U(255) = 255` scale), up to every
     /// pixel or half the frames' memory.
     pub target_std_error: f64,
-    /// Most pixels drawn (0: no limit).
+    /// Most pixels drawn (0: every pixel if the standard errors need them).
     pub max_pixels: usize,
 }
 
@@ -110,12 +113,13 @@ impl Default for ResponseOptions {
             tolerance: 0.01,
             smoothness: 3.0,
             saturation_border: 2,
+            saturation_block: 0,
             min_count: 20,
             weighting: Weighting::Auto,
-            estimator: EstimatorChoice::Auto,
+            choose_prior: true,
             huber: 3.0,
             target_std_error: 0.1,
-            max_pixels: 0,
+            max_pixels: DEFAULT_MAX_PIXELS,
         }
     }
 }
@@ -163,6 +167,13 @@ impl ResponseOptions {
                 "0 to 256 pixels",
             );
         }
+        if self.saturation_block > 256 {
+            return bad(
+                "saturation_block",
+                self.saturation_block.to_string(),
+                "0 to 256 pixels",
+            );
+        }
         if !(self.huber.is_finite() && self.huber >= 1.0) {
             return bad(
                 "huber",
@@ -179,18 +190,6 @@ impl ResponseOptions {
         }
         Ok(())
     }
-}
-
-/// Which estimators the calibration may use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EstimatorChoice {
-    /// Whichever predicts held-out exposures best.
-    Auto,
-    /// Maximum likelihood of the recorded grey values.
-    Grey,
-    /// `U(k)` the mean energy of the values `k`.
-    Energy,
 }
 
 /// The measured noise in one bin of predicted grey values.
@@ -230,8 +229,8 @@ pub struct ResponseCalibration {
     pub filled: Vec<u32>,
     /// Pixels per grey value, over all frames.
     pub histogram: Vec<u64>,
-    /// Observations of the sample predicted at each knot of the estimate (per grey value
-    /// for frames of up to 9 bits; see `knot_step`).
+    /// Values of the sample (not clipped) predicted at each knot of the estimate (per grey
+    /// value for frames of up to 9 bits; see `knot_step`).
     pub used: Vec<u64>,
     /// Grey values per knot of the estimate: 1 for frames of up to 9 bits, `(2^k - 1) /
     /// (MAX_KNOTS - 1)` for deeper ones.
@@ -243,9 +242,10 @@ pub struct ResponseCalibration {
     pub noise: Option<NoiseModel>,
     /// The weights used.
     pub weighting: Weighting,
-    /// The estimator used.
-    pub estimator: Estimator,
-    /// The held-out check that chose them (when there was a choice).
+    /// The prior's weight relative to what the exposures' ripples need (1, or what the
+    /// held-out check chose).
+    pub prior_scale: f64,
+    /// The held-out check that chose the weights and the prior (when there was a choice).
     pub held_out: Option<HeldOutScores>,
     /// The prior's median weight relative to the information per grey value (`scale^6`).
     pub prior_weight: f64,
@@ -356,36 +356,23 @@ fn check_input<T: Sample>(
     Ok(distinct)
 }
 
+/// With JPEG frames (`saturation_block` set), values this many 8-bit grey values below the
+/// top count as clipped: a saturated area decodes to values just under the top (quality
+/// 90: 253 and 254 besides 255).
+const JPEG_CLIP: u32 = 2;
+
 /// Pixels in the first draw.
 const FIRST_DRAW: usize = 1 << 15;
 
+/// Most pixels drawn by default: 131,072 pixels of 120 frames are 16 million observations,
+/// which determine 256 values far beyond the systematic errors (a 1280x1024 sweep of the
+/// high-noise sensor: 0.08 grey values largest error with every pixel, 0.17 with these).
+pub const DEFAULT_MAX_PIXELS: usize = 1 << 17;
+
 /// Most pixels of the held-out check, and the observations it aims at (fewer pixels for
 /// longer sweeps).
-const CHECK_PIXELS: usize = 1 << 14;
-const CHECK_OBSERVATIONS: usize = 1 << 18;
-
-/// The candidate fits the options allow, the default first.
-fn candidates(options: &ResponseOptions) -> Vec<Candidate> {
-    let estimators: &[Estimator] = match options.estimator {
-        EstimatorChoice::Auto => &[Estimator::Grey, Estimator::Energy],
-        EstimatorChoice::Grey => &[Estimator::Grey],
-        EstimatorChoice::Energy => &[Estimator::Energy],
-    };
-    let weights: &[bool] = match options.weighting {
-        Weighting::Auto => &[true, false],
-        Weighting::Measured => &[true],
-        Weighting::Uniform => &[false],
-    };
-    estimators
-        .iter()
-        .flat_map(|&estimator| {
-            weights.iter().map(move |&measured| Candidate {
-                estimator,
-                measured,
-            })
-        })
-        .collect()
-}
+const CHECK_PIXELS: usize = 1 << 13;
+const CHECK_OBSERVATIONS: usize = 1 << 17;
 
 /// A fit on the growing sample, and the sampling error of the determined values.
 struct Grown {
@@ -425,7 +412,7 @@ fn fit_growing<T: Sample>(
     .min(memory_cap);
     let top = base.levels.top;
     let mut n = FIRST_DRAW.min(limit);
-    let mut samples = draw(frames, scan, top, options.saturation_border, n);
+    let mut samples = draw(frames, scan, top, options.saturation_border, options.saturation_block, n);
     let mut start = Start::Cold;
     let mut iterations = 0;
     let mut change = Vec::new();
@@ -460,7 +447,7 @@ fn fit_growing<T: Sample>(
         // the error falls with the square root of the pixels
         let want = (n as f64 * (se / options.target_std_error).powi(2) * 1.2).ceil() as usize;
         let next = want.clamp(2 * n, limit.max(2 * n)).min(limit);
-        let bigger = draw(frames, scan, top, options.saturation_border, next);
+        let bigger = draw(frames, scan, top, options.saturation_border, options.saturation_block, next);
         let b = carry_over(&samples, &bigger, &fit.b);
         start = Start::Warm {
             u: fit.u,
@@ -494,6 +481,15 @@ fn calibrate<T: Sample>(
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<ResponseCalibration, PhotometricError> {
     options.check()?;
+    // JPEG frames: values within JPEG_CLIP of the top count as clipped
+    let levels = Levels {
+        clip: if options.saturation_block > 1 {
+            levels.top - JPEG_CLIP * levels.top / 255
+        } else {
+            levels.top
+        },
+        ..levels
+    };
     let t0 = std::time::Instant::now();
     let trace = std::env::var_os("MONOVO_TRACE").is_some();
     let tr = |what: &str| {
@@ -522,20 +518,22 @@ fn calibrate<T: Sample>(
         smoothness: options.smoothness,
         huber: options.huber,
         measured: options.weighting != Weighting::Uniform,
-        estimator: match options.estimator {
-            EstimatorChoice::Energy => Estimator::Energy,
-            _ => Estimator::Grey,
-        },
+        prior_scale: 1.0,
     };
-    let candidates = candidates(options);
     tr("scan");
-    let held_out = if candidates.len() > 1 {
+    let weightings: &[bool] = match options.weighting {
+        Weighting::Auto => &[true, false],
+        Weighting::Measured => &[true],
+        Weighting::Uniform => &[false],
+    };
+    let held_out = if weightings.len() > 1 || options.choose_prior {
         // fewer pixels for longer sweeps: the check's cost grows with the observations
         let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-        let check = draw(frames, &sc, top, options.saturation_border, n);
-        let (best, scores) = select::choose(&base, &check, &candidates)?;
-        base.measured = candidates[best].measured;
-        base.estimator = candidates[best].estimator;
+        let check = draw(frames, &sc, top, options.saturation_border, options.saturation_block, n);
+        let (measured, prior_scale, scores) =
+            select::choose(&base, &check, weightings, options.choose_prior)?;
+        base.measured = measured;
+        base.prior_scale = prior_scale;
         Some(scores)
     } else {
         None
@@ -608,8 +606,8 @@ fn calibrate<T: Sample>(
         } else {
             Weighting::Uniform
         },
-        estimator: base.estimator,
         held_out,
+        prior_scale: base.prior_scale,
         prior_weight: median(&fit.prior),
         pixels_sampled: grown.samples.len(),
         pixels_available: sc.order.len(),
@@ -626,7 +624,7 @@ fn median(v: &[f64]) -> f64 {
 }
 
 /// How much the standard errors exceed the estimate from the sampling and the sensitivities.
-const UNCERTAINTY_FACTOR: f64 = 2.0;
+const UNCERTAINTY_FACTOR: f64 = 1.5;
 
 /// The relative floor of the standard errors.
 const UNCERTAINTY_FLOOR: f64 = 1e-3;

@@ -13,15 +13,15 @@ use crate::noise::slope_at;
 /// or more where the exposures leave ripples undetermined: `RIPPLE_MARGIN T / (2 pi)` with the
 /// local ripple period `T = P U / U'` (a factor periodic in `log U` with period `P`, the
 /// exposures' ripple period). The ripples are short where `U` is steep (a camera's shoulder),
-/// so the prior is weak there and does not flatten it.
-pub(super) fn prior_weights(u: &[f64], log_gap: f64, smoothness: f64) -> Vec<f64> {
+/// so the prior is weak there and does not flatten it. `scale` multiplies every weight.
+pub(super) fn prior_weights(u: &[f64], log_gap: f64, smoothness: f64, scale: f64) -> Vec<f64> {
     let n = u.len();
     (0..n.saturating_sub(3))
         .map(|r| {
             let k = r + 1;
             let period = log_gap * u[k].max(u[r + 2]) / slope_at(u, k);
-            let scale = smoothness.max(RIPPLE_MARGIN * period / std::f64::consts::TAU);
-            scale.powi(6)
+            let s = smoothness.max(RIPPLE_MARGIN * period / std::f64::consts::TAU);
+            scale * s.powi(6)
         })
         .collect()
 }
@@ -61,20 +61,6 @@ pub(super) fn penalty(u: &[f64], info: &[f64], weights: &[f64]) -> Penalty {
         }
     }
     Penalty { value, grad, hess }
-}
-
-/// The third-difference operator's normal matrix `D3^T D3` (`n x n`).
-pub(super) fn third_difference_normal(n: usize) -> DMatrix<f64> {
-    let mut m = DMatrix::zeros(n, n);
-    let c = [-1.0, 3.0, -3.0, 1.0];
-    for r in 0..n - 3 {
-        for (a, ca) in c.iter().enumerate() {
-            for (b, cb) in c.iter().enumerate() {
-                m[(r + a, r + b)] += ca * cb;
-            }
-        }
-    }
-    m
 }
 
 /// The values the data determine: from the first to the last grey value with at least

@@ -29,6 +29,9 @@ impl Sample for u16 {
 pub(super) struct Levels {
     /// The largest grey value, `2^k - 1` (saturation).
     pub top: u32,
+    /// Values from this one up count as clipped (censored): `top`, or a little below it
+    /// for JPEG frames, whose clipped areas decode to values just under the top.
+    pub clip: u32,
     /// Number of knots.
     pub knots: usize,
     /// Knot position per grey value, `(knots - 1) / top`.
@@ -41,6 +44,7 @@ impl Levels {
         let knots = (top as usize + 1).min(max_knots);
         Levels {
             top,
+            clip: top,
             knots,
             scale: (knots - 1) as f64 / top as f64,
         }
@@ -173,13 +177,14 @@ impl Samples {
 
 /// The first `n` pixels of the draw (all informative pixels when `n` is larger), their
 /// values ordered by tile, with the observations that have a saturated pixel of the same
-/// frame within `radius` excluded (a saturated value without one stays: it is a censored
-/// observation).
+/// frame within `radius` or in the same aligned `block` (JPEG's 8x8; 0: none) excluded (a
+/// saturated value without one stays: it is a censored observation).
 pub(super) fn draw<T: Sample>(
     frames: &[Image<T>],
     scan: &Scan,
     top: u32,
     radius: usize,
+    block: usize,
     n: usize,
 ) -> Samples {
     let (w, h) = frames[0].size();
@@ -216,9 +221,18 @@ pub(super) fn draw<T: Sample>(
                     // a saturated neighbour excludes the value whatever the value is (also
                     // when it is saturated itself): excluding only the unsaturated values
                     // would keep the clipped ones preferentially and bias U near the top
-                    let near = radius > 0
+                    let near = (radius > 0
                         && (y0..=y1).any(|yy| {
                             (x0..=x1).any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
+                        }))
+                        || (block > 1 && {
+                            // JPEG codes each block on its own: a clipped pixel rings through
+                            // its whole block
+                            let (bx, by) = (x - x % block, y - y % block);
+                            (by..(by + block).min(h)).any(|yy| {
+                                (bx..(bx + block).min(w))
+                                    .any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
+                            })
                         });
                     out[k * nf + i] = v as u16;
                     if near {

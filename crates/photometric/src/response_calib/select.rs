@@ -1,49 +1,43 @@
-//! The truth-free check that chooses how to fit: the exposures are split into folds (each
-//! exposure its own fold when there are few), each candidate fit is repeated without each
-//! fold, and the frames of the fold are predicted from the pixels' other frames through the
-//! fitted `U`: each pixel's irradiance from its other values by least squares,
-//! `B' = sum t U(I) / sum t^2` (the same for every candidate, so that only `U` differs), then
-//! `G(t B')` against the value the camera recorded. The candidate that predicts the held-out
-//! frames best is used.
+//! The truth-free check that chooses the weights and the prior's strength: the exposures are
+//! split into folds (each exposure its own fold when there are few), each candidate fit is
+//! repeated without each fold, and the frames of the fold are predicted from the pixels' other
+//! frames through the fitted `U`: each pixel's irradiance from its other values by least
+//! squares, `B' = sum t U(I) / sum t^2` (the same for all, so that only `U` differs), then
+//! `G(t B')` against the value the camera recorded. Measured weights are kept unless uniform
+//! weights predict the held-out frames better; a weaker prior only when it predicts them
+//! clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
+//! tie keeps the prior the ripples need).
 
 use super::model::{Forward, Obs};
 use super::samples::Samples;
-use super::solver::{solve, Estimator, Problem, Settings, Start};
+use super::solver::{solve, Problem, Settings, Start};
 use crate::noise::interp;
 use crate::PhotometricError;
 
 /// Folds of the check: every distinct exposure its own fold up to this many, else this many
-/// interleaved folds (by exposure rank).
-const MAX_FOLDS: usize = 16;
+/// interleaved folds (by exposure rank): every exposure is held out once.
+const MAX_FOLDS: usize = 8;
 
 /// Iterations of a fold's fit (warm from the fit on all exposures).
-const FOLD_ITERATIONS: usize = 12;
+const FOLD_ITERATIONS: usize = 6;
 
-/// One way to fit that the check compares.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct Candidate {
-    pub estimator: Estimator,
-    pub measured: bool,
-}
-
-/// The held-out score of one candidate.
+/// One candidate fit and its held-out score.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CandidateScore {
-    /// `grey` (maximum likelihood of the recorded values) or `energy` (`U(k)` the mean
-    /// energy of the values `k`).
-    pub estimator: String,
-    /// `measured` or `uniform`.
-    pub weighting: String,
-    /// RMS prediction error of the held-out frames in grey values.
+    /// Weighted by the measured noise (else uniformly).
+    pub measured: bool,
+    /// The prior's weight relative to what the exposures' ripples need.
+    pub prior_scale: f64,
+    /// RMS prediction error of the held-out frames, grey values.
     pub rms: f64,
 }
 
-/// The held-out check: every candidate's score, over the same observations.
+/// The held-out check: every candidate's score over the same observations, and the choice.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HeldOutScores {
-    /// The candidates in the order tried (the first of equal scores wins).
+    /// The candidates, in the order of preference.
     pub candidates: Vec<CandidateScore>,
-    /// Index of the chosen candidate.
+    /// Index of the chosen one.
     pub chosen: usize,
     /// Held-out observations scored.
     pub observations: u64,
@@ -52,6 +46,12 @@ pub struct HeldOutScores {
     /// Pixels of the check.
     pub pixels: usize,
 }
+
+/// The priors the check tries, strongest first.
+pub(super) const PRIOR_SCALES: [f64; 3] = [1.0, 0.1, 0.01];
+
+/// How much better (relative RMS) a weaker prior must predict to be chosen.
+const WEAKER_PRIOR_MARGIN: f64 = 0.01;
 
 /// The fold of each frame: distinct exposures (relative tolerance 1e-6) in rank order.
 pub(super) fn folds(exposures: &[f64]) -> (Vec<usize>, usize) {
@@ -144,7 +144,7 @@ fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, Ph
             },
             &Settings {
                 max_iterations: FOLD_ITERATIONS,
-                tolerance: 0.02,
+                tolerance: 0.05,
                 tiles: false,
                 progress: &quiet,
             },
@@ -186,22 +186,30 @@ fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, Ph
     Ok(out)
 }
 
-/// Scores the candidates on `samples` and returns the index of the best with the scores.
+/// Scores the candidates (measured and uniform weights, each with the priors of
+/// [`PRIOR_SCALES`] when `priors`) on `samples`; returns the chosen one's weighting and prior
+/// scale, with the scores.
 pub(super) fn choose(
     base: &Problem<'_>,
     samples: &Samples,
-    candidates: &[Candidate],
-) -> Result<(usize, HeldOutScores), PhotometricError> {
+    weightings: &[bool],
+    priors: bool,
+) -> Result<(bool, f64, HeldOutScores), PhotometricError> {
     let (fold, k) = folds(base.exposures);
-    let mut residuals = Vec::with_capacity(candidates.len());
-    for c in candidates {
-        let p = Problem {
-            estimator: c.estimator,
-            measured: c.measured,
-            samples,
-            ..*base
-        };
-        residuals.push(held_out(&p, &fold, k)?);
+    let scales: &[f64] = if priors { &PRIOR_SCALES } else { &PRIOR_SCALES[..1] };
+    let mut cands = Vec::new();
+    let mut residuals = Vec::new();
+    for &prior_scale in scales {
+        for &measured in weightings {
+            let p = Problem {
+                measured,
+                prior_scale,
+                samples,
+                ..*base
+            };
+            residuals.push(held_out(&p, &fold, k)?);
+            cands.push((measured, prior_scale));
+        }
     }
     let len = residuals.iter().map(Vec::len).min().unwrap_or(0);
     let common: Vec<bool> = (0..len)
@@ -218,17 +226,23 @@ pub(super) fn choose(
             (ss / n.max(1) as f64).sqrt()
         })
         .collect();
-    let chosen = (0..rms.len())
-        .min_by(|&a, &b| rms[a].total_cmp(&rms[b]).then(a.cmp(&b)))
-        .unwrap_or(0);
+    // the best of each prior; a weaker prior replaces a stronger one only by the margin
+    let mut chosen = 0;
+    for c in 1..cands.len() {
+        let weaker = cands[c].1 < cands[chosen].1;
+        let margin = if weaker { 1.0 - WEAKER_PRIOR_MARGIN } else { 1.0 };
+        if rms[c] < rms[chosen] * margin {
+            chosen = c;
+        }
+    }
     let scores = HeldOutScores {
-        candidates: candidates
+        candidates: cands
             .iter()
             .zip(&rms)
-            .map(|(c, &r)| CandidateScore {
-                estimator: c.estimator.name().into(),
-                weighting: if c.measured { "measured" } else { "uniform" }.into(),
-                rms: r,
+            .map(|(&(measured, prior_scale), &rms)| CandidateScore {
+                measured,
+                prior_scale,
+                rms,
             })
             .collect(),
         chosen,
@@ -236,5 +250,5 @@ pub(super) fn choose(
         folds: k,
         pixels: samples.len(),
     };
-    Ok((chosen, scores))
+    Ok((cands[chosen].0, cands[chosen].1, scores))
 }

@@ -24,28 +24,11 @@ const B_BINS: usize = 256;
 /// frozen, so that the iteration converges on a fixed problem.
 pub(super) const ADAPT_ITERATIONS: usize = 5;
 
+/// Steps taken back in a row after which the accepted state counts as converged.
+const MAX_TAKEN_BACK: usize = 4;
+
 /// Iterations of the paper's alternation that give the starting point.
 const INITIAL_ITERATIONS: usize = 8;
-
-/// How `U` is fitted to the pixels' irradiances.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Estimator {
-    /// Maximum likelihood of the recorded grey values (`G(t B')` against `I`).
-    Grey,
-    /// `U(k)` the mean energy `t B'` of the values `k` (the paper's step, on unbiased `B'`).
-    Energy,
-}
-
-impl Estimator {
-    /// The name in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Estimator::Grey => "grey",
-            Estimator::Energy => "energy",
-        }
-    }
-}
 
 /// The problem: the sampled observations, the exposures, which frames enter.
 pub(super) struct Problem<'a> {
@@ -61,8 +44,8 @@ pub(super) struct Problem<'a> {
     pub huber: f64,
     /// Weight each observation by the measured noise at its prediction (else uniformly).
     pub measured: bool,
-    /// How `U` is fitted.
-    pub estimator: Estimator,
+    /// The prior's weight relative to what the exposures' ripples need (1: as they need).
+    pub prior_scale: f64,
 }
 
 impl Problem<'_> {
@@ -74,7 +57,7 @@ impl Problem<'_> {
     /// Clipping points in knots: half a grey value above 0 and below the top.
     fn clips(&self) -> (f64, f64) {
         let half = 0.5 * self.levels.scale;
-        (half, (self.levels.knots - 1) as f64 - half)
+        (half, self.levels.pos(self.levels.clip) - half)
     }
 }
 
@@ -91,13 +74,11 @@ pub(super) struct Sums {
     pub hess: Vec<f64>,
     /// Pixels by `B'` (log-spaced bins).
     bins: Vec<f64>,
-    /// Observations predicted at each knot.
+    /// Values (not clipped) predicted at each knot.
     pub used: Vec<u64>,
     /// Residuals of the values for the noise measurement.
     pub resid: ResidualStats,
-    /// The energy regression: `sum t B'` and the weight of the values at each knot.
-    pub esum: Vec<f64>,
-    pub ecnt: Vec<f64>,
+
     /// The objective without the prior.
     pub objective: f64,
     /// Squared residuals and count of the values (for the RMS).
@@ -119,8 +100,6 @@ impl Sums {
             bins: vec![0.0; B_BINS],
             used: vec![0; n],
             resid: ResidualStats::new(n),
-            esum: vec![0.0; n],
-            ecnt: vec![0.0; n],
             objective: 0.0,
             ss: 0.0,
             nres: 0,
@@ -135,8 +114,6 @@ impl Sums {
             self.off[k] += o.off[k];
             self.rhs[k] += o.rhs[k];
             self.used[k] += o.used[k];
-            self.esum[k] += o.esum[k];
-            self.ecnt[k] += o.ecnt[k];
         }
         for (a, b) in self.bins.iter_mut().zip(&o.bins) {
             *a += b;
@@ -191,7 +168,7 @@ fn closed_form(p: &Problem<'_>, u: &[f64], px: usize) -> f64 {
     let s = p.samples;
     for (i, &v) in s.pixel(px).iter().enumerate() {
         let v = v as u32;
-        if p.enters(i) && v > 0 && v < p.levels.top && !s.is_excluded(px, i) {
+        if p.enters(i) && v > 0 && v < p.levels.clip && !s.is_excluded(px, i) {
             let t = p.exposures[i];
             num += t * interp(u, p.levels.pos(v));
             den += t * t;
@@ -213,7 +190,7 @@ fn b_step(p: &Problem<'_>, m: &Model<'_>, px: usize, b: &mut f64) -> f64 {
         .iter()
         .enumerate()
         .filter(|&(i, &v)| {
-            p.enters(i) && v > 0 && (v as u32) < p.levels.top && !s.is_excluded(px, i)
+            p.enters(i) && v > 0 && (v as u32) < p.levels.clip && !s.is_excluded(px, i)
         })
         .count();
     if inside < 2 {
@@ -321,19 +298,10 @@ fn pass_chunk(
             if !m.measure {
                 sums.objective += weight * sd * sd * nll(obs, mu, sd, p.huber);
             }
-            sums.used[(mu.round() as usize).min(n - 1)] += 1;
-            if let Obs::Value(q) = obs {
+            if let Obs::Value(_) = obs {
+                sums.used[(mu.round() as usize).min(n - 1)] += 1;
                 sums.ss += r * r;
                 sums.nres += 1;
-                // the energy regression, each value at its knot position, outliers bounded
-                let hf = w / weight;
-                let j0 = (q as usize).min(n - 2);
-                let f0 = q - j0 as f64;
-                let e = t * bq;
-                sums.esum[j0] += hf * (1.0 - f0) * e;
-                sums.ecnt[j0] += hf * (1.0 - f0);
-                sums.esum[j0 + 1] += hf * f0 * e;
-                sums.ecnt[j0 + 1] += hf * f0;
             }
             // G is flat beyond the ends of the table: no slope there
             if raw != mu {
@@ -512,13 +480,15 @@ pub(super) fn u_system(
     }
     // the new model is G - a.d, so the residual becomes r + a.d
     let mut b = DVector::from_fn(n, |k, _| -sums.rhs[k] - lambda * pen.grad[k]);
-    let gauge = gauge(n);
-    for k in 0..n {
-        a[(gauge, k)] = 0.0;
-        a[(k, gauge)] = 0.0;
+    // held: the gauge, and U(0) = 0 (the black level: no light reads 0)
+    for held in [gauge(n), 0] {
+        for k in 0..n {
+            a[(held, k)] = 0.0;
+            a[(k, held)] = 0.0;
+        }
+        a[(held, held)] = 1.0;
+        b[held] = 0.0;
     }
-    a[(gauge, gauge)] = 1.0;
-    b[gauge] = 0.0;
     // a tiny ridge keeps the system definite where neither data nor prior reach
     let ridge = 1e-12 * (0..n).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-300);
     for k in 0..n {
@@ -543,7 +513,7 @@ fn solve_u_step(
 ) -> Result<Vec<f64>, PhotometricError> {
     let n = u.len();
     let (mut a, b) = u_system(u, sums, pen, 1.0);
-    for k in 0..n {
+    for k in 1..n {
         if k != gauge(n) {
             a[(k, k)] += damping * sums.diag[k];
         }
@@ -557,52 +527,6 @@ fn solve_u_step(
         return Err(PhotometricError::Calibration(
             "the response step diverged (not finite); the data do not determine U".into(),
         ));
-    }
-    Ok(out)
-}
-
-/// The energy U step: `U(m)` the (outlier-bounded) mean of `t B'` over the values `m`,
-/// weighted by the inverse variance of `t B'` at `m` (`sd^2 U'^2`) or alike, with the
-/// third-difference prior.
-fn energy_step(
-    u: &[f64],
-    sums: &Sums,
-    noise: &Noise,
-    prior: &[f64],
-    measured: bool,
-) -> Result<Vec<f64>, PhotometricError> {
-    let n = u.len();
-    let w: Vec<f64> = (0..n)
-        .map(|k| {
-            if sums.ecnt[k] <= 0.0 {
-                return 0.0;
-            }
-            if measured {
-                let s = crate::noise::slope_at(u, k);
-                sums.ecnt[k] / (noise.sd[k] * noise.sd[k] * s * s)
-            } else {
-                sums.ecnt[k]
-            }
-        })
-        .collect();
-    // one Gauss-Newton step of sum w (U - mean)^2 + prior from u
-    let pen = penalty(u, &w, prior);
-    let mut a = pen.hess.clone();
-    let mut b = &pen.hess * DVector::from_column_slice(u) - &pen.grad;
-    for k in 0..n {
-        a[(k, k)] += w[k];
-        if w[k] > 0.0 {
-            b[k] += w[k] * sums.esum[k] / sums.ecnt[k];
-        }
-    }
-    let ridge = 1e-12 * (0..n).map(|k| a[(k, k)]).fold(0.0, f64::max).max(1e-300);
-    for k in 0..n {
-        a[(k, k)] += ridge;
-    }
-    let d = a.cholesky().ok_or_else(singular)?.solve(&b);
-    let out: Vec<f64> = d.iter().copied().collect();
-    if out.iter().any(|v| !v.is_finite()) {
-        return Err(singular());
     }
     Ok(out)
 }
@@ -710,6 +634,10 @@ pub(super) struct Fit {
     pub change: Vec<f64>,
 }
 
+/// The last state whose step was taken: `U`, `B'`, the sums at them, the prior and the
+/// objective.
+type Accepted = (Vec<f64>, Vec<f64>, Sums, Penalty, f64);
+
 /// Iteration settings.
 pub(super) struct Settings<'a> {
     pub max_iterations: usize,
@@ -769,6 +697,7 @@ pub(super) fn solve(
         }
         Start::Cold => {
             let mut u = initial_response(p);
+            u[0] = 0.0;
             let g = 128.0 * top / 255.0 / u[gauge(n)].max(1e-12);
             for v in u.iter_mut() {
                 *v *= g;
@@ -777,13 +706,14 @@ pub(super) fn solve(
             (u, vec![f64::NAN; npx], Noise::measured(&vec![var; n]), None)
         }
     };
-    let mut prior = prior_weights(&u, p.log_gap, p.smoothness);
+    let mut prior = prior_weights(&u, p.log_gap, p.smoothness, p.prior_scale);
     let mut change = Vec::new();
     let mut damping = if warm { 0.0 } else { 0.3f64 };
-    let mut last_objective = f64::INFINITY;
     let mut converged = false;
     let mut iterations = 0;
-    let mut last = None;
+    // the last state whose step was taken: U, B', the sums at them, the prior, the objective
+    let mut accepted: Option<Accepted> = None;
+    let mut taken_back = 0;
     let max_iter = set.max_iterations.max(1);
     for it in 0..max_iter {
         iterations = it + 1;
@@ -792,8 +722,9 @@ pub(super) fn solve(
         let model = Model {
             fwd: Forward::new(&u),
             noise: &noise,
-            // two Newton steps while B' is far off (a start, a new pixel), then one
-            b_steps: if it < 2 { 2 } else { 1 },
+            // B' near its optimum at this U: the objectives of two iterations compare the
+            // profiled problem
+            b_steps: 2,
             measure: adapt,
             b_min,
             b_max,
@@ -808,25 +739,39 @@ pub(super) fn solve(
         }
         sums.hess = profiled_hessian(p, &model, &sums);
         if adapt {
-            prior = prior_weights(&u, p.log_gap, p.smoothness);
+            prior = prior_weights(&u, p.log_gap, p.smoothness, p.prior_scale);
         }
-        let pscale: f64 = std::env::var("MONOVO_PRIOR").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
-        let prior_s: Vec<f64> = prior.iter().map(|v| v * pscale).collect();
-        let pen = penalty(&u, &sums.diag, &prior_s);
-        let objective = sums.objective + pen.value;
-        if !adapt {
-            damping = if objective > last_objective {
-                (damping * 4.0).max(1e-3)
-            } else {
-                damping / 3.0
-            };
-        }
-        last_objective = objective;
-        let mut nu = if p.estimator == Estimator::Energy {
-            energy_step(&u, &sums, &noise, &prior_s, p.measured)?
+        let pen = penalty(&u, &sums.diag, &prior);
+        // while the noise and the prior adapt, objectives are not comparable (nor computed)
+        let objective = if adapt {
+            f64::INFINITY
         } else {
-            solve_u_step(&u, &sums, &pen, damping)?
+            sums.objective + pen.value
         };
+        // Levenberg-Marquardt: a step that made the (frozen) problem worse is taken back and
+        // tried again shorter
+        let worse = !adapt
+            && accepted
+                .as_ref()
+                .is_some_and(|a| objective > a.4 * (1.0 + 1e-7) && a.4.is_finite());
+        if worse {
+            damping = (damping * 4.0).max(1e-3);
+            taken_back += 1;
+        } else {
+            taken_back = 0;
+            if !adapt {
+                damping /= 3.0;
+            }
+            accepted = Some((u.clone(), b.clone(), sums, pen, objective));
+        }
+        let Some((u0, b0, sums, pen, _)) = accepted.as_ref() else {
+            return Err(singular());
+        };
+        if worse {
+            u.clone_from(u0);
+            b.clone_from(b0);
+        }
+        let mut nu = solve_u_step(&u, sums, pen, damping)?;
         let info: Vec<f64> = (0..n).map(|k| sums.diag[k] + pen.hess[(k, k)]).collect();
         for v in nu.iter_mut() {
             *v = v.max(0.0);
@@ -853,23 +798,31 @@ pub(super) fn solve(
                 measured = Some(m);
             }
         }
-        let u_prev = std::mem::replace(&mut u, nu);
+        u = nu;
         (set.progress)(iterations, delta);
         if std::env::var_os("MONOVO_TRACE").is_some() {
             eprintln!(
-                "  it {iterations} px {} change {delta:.4} obj {objective:.6e} damping {damping:.2e} U[top] {:.3}",
+                "  it {iterations} px {} change {delta:.4} obj {objective:.6e} damping {damping:.2e}{}",
                 p.samples.len(),
-                u[n - 1] * 255.0 / u[n - 1]
+                if worse { " (taken back)" } else { "" }
             );
         }
-        let done = delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS);
-        last = Some((u_prev, sums, pen));
-        if done {
+        // converged: the step is below the tolerance, or no step improves the accepted state
+        // any more (the objective's rounding and the B' steps' own error bound it)
+        if (!worse && delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS))
+            || taken_back >= MAX_TAKEN_BACK
+        {
+            if taken_back > 0 {
+                u.clone_from(&accepted.as_ref().map_or(u.clone(), |a| a.0.clone()));
+                if let Some(a) = &accepted {
+                    b.clone_from(&a.1);
+                }
+            }
             converged = true;
             break;
         }
     }
-    let Some((u_prev, sums, pen)) = last else {
+    let Some((u_prev, _, sums, pen, _)) = accepted else {
         return Err(singular());
     };
     Ok(Fit {

@@ -49,7 +49,13 @@ pub(super) fn standard_errors(
             }
         }
         for (_, grad) in tiles {
-            let v = DVector::from_fn(n, |k, _| if k == g { 0.0 } else { grad[k] - mean[k] });
+            let v = DVector::from_fn(n, |k, _| {
+                if k == g || k == 0 {
+                    0.0
+                } else {
+                    grad[k] - mean[k]
+                }
+            });
             meat.ger(1.0, &v, &v, 1.0);
         }
         meat *= c as f64 / (c as f64 - 1.0);
