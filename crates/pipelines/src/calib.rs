@@ -1007,8 +1007,7 @@ pub fn calibrate_response_sequence(
             (1usize << bits).min(photometric::MAX_KNOTS),
             1u32 << bits
         );
-        let cal =
-            photometric::calibrate_response_deep(&frames, bits, &exposures, &options, &tick);
+        let cal = photometric::calibrate_response_deep(&frames, bits, &exposures, &options, &tick);
         observer.finish();
         ResponseRun {
             cal: cal.with_context(context)?,

@@ -117,7 +117,7 @@ impl Default for ResponseOptions {
             min_count: 20,
             weighting: Weighting::Auto,
             choose_prior: true,
-            huber: 3.0,
+            huber: 5.0,
             target_std_error: 0.1,
             max_pixels: DEFAULT_MAX_PIXELS,
         }
@@ -269,7 +269,13 @@ pub fn calibrate_response(
     options: &ResponseOptions,
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<ResponseCalibration, PhotometricError> {
-    calibrate(frames, Levels::new(8, MAX_KNOTS), exposures_ms, options, progress)
+    calibrate(
+        frames,
+        Levels::new(8, MAX_KNOTS),
+        exposures_ms,
+        options,
+        progress,
+    )
 }
 
 /// Calibrates the `2^bits`-value inverse response of a sensor deeper than 8 bits (`bits`
@@ -412,7 +418,14 @@ fn fit_growing<T: Sample>(
     .min(memory_cap);
     let top = base.levels.top;
     let mut n = FIRST_DRAW.min(limit);
-    let mut samples = draw(frames, scan, top, options.saturation_border, options.saturation_block, n);
+    let mut samples = draw(
+        frames,
+        scan,
+        top,
+        options.saturation_border,
+        options.saturation_block,
+        n,
+    );
     let mut start = Start::Cold;
     let mut iterations = 0;
     let mut change = Vec::new();
@@ -426,7 +439,8 @@ fn fit_growing<T: Sample>(
             &p,
             start,
             &Settings {
-                max_iterations: options.max_iterations,
+                // the growth stages share the iteration budget
+                max_iterations: options.max_iterations.saturating_sub(iterations).max(1),
                 tolerance: options.tolerance,
                 tiles: true,
                 progress: &|i, d| progress(offset + i, d),
@@ -435,7 +449,7 @@ fn fit_growing<T: Sample>(
         iterations += fit.iterations;
         change.extend_from_slice(&fit.change);
         let se = sampling_error(&fit)?;
-        if se <= options.target_std_error || n >= limit {
+        if se <= options.target_std_error || n >= limit || iterations >= options.max_iterations {
             return Ok(Grown {
                 fit,
                 samples,
@@ -447,7 +461,14 @@ fn fit_growing<T: Sample>(
         // the error falls with the square root of the pixels
         let want = (n as f64 * (se / options.target_std_error).powi(2) * 1.2).ceil() as usize;
         let next = want.clamp(2 * n, limit.max(2 * n)).min(limit);
-        let bigger = draw(frames, scan, top, options.saturation_border, options.saturation_block, next);
+        let bigger = draw(
+            frames,
+            scan,
+            top,
+            options.saturation_border,
+            options.saturation_block,
+            next,
+        );
         let b = carry_over(&samples, &bigger, &fit.b);
         start = Start::Warm {
             u: fit.u,
@@ -490,13 +511,6 @@ fn calibrate<T: Sample>(
         },
         ..levels
     };
-    let t0 = std::time::Instant::now();
-    let trace = std::env::var_os("MONOVO_TRACE").is_some();
-    let tr = |what: &str| {
-        if trace {
-            eprintln!("[{:.3}] {what}", t0.elapsed().as_secs_f64());
-        }
-    };
     let distinct = check_input(frames, exposures_ms)?;
     let nk = levels.knots;
     let top = levels.top;
@@ -520,7 +534,6 @@ fn calibrate<T: Sample>(
         measured: options.weighting != Weighting::Uniform,
         prior_scale: 1.0,
     };
-    tr("scan");
     let weightings: &[bool] = match options.weighting {
         Weighting::Auto => &[true, false],
         Weighting::Measured => &[true],
@@ -529,7 +542,14 @@ fn calibrate<T: Sample>(
     let held_out = if weightings.len() > 1 || options.choose_prior {
         // fewer pixels for longer sweeps: the check's cost grows with the observations
         let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-        let check = draw(frames, &sc, top, options.saturation_border, options.saturation_block, n);
+        let check = draw(
+            frames,
+            &sc,
+            top,
+            options.saturation_border,
+            options.saturation_block,
+            n,
+        );
         let (measured, prior_scale, scores) =
             select::choose(&base, &check, weightings, options.choose_prior)?;
         base.measured = measured;
@@ -538,9 +558,7 @@ fn calibrate<T: Sample>(
     } else {
         None
     };
-    tr("held-out check");
     let grown = fit_growing(frames, &base, &sc, options, progress)?;
-    tr("fit");
     let fit = &grown.fit;
 
     // what the data determine
@@ -583,7 +601,6 @@ fn calibrate<T: Sample>(
         (all(&base_u), all(&std_error), all(&systematic))
     };
     let response = InverseResponse::from_values(table)?;
-    tr("errors");
     let rmse = (fit.sums.ss / fit.sums.nres.max(1) as f64).sqrt() / levels.scale;
     let (measured_noise, noise) = describe_noise(fit.measured.as_ref(), &fit.u, levels);
     Ok(ResponseCalibration {
@@ -624,7 +641,7 @@ fn median(v: &[f64]) -> f64 {
 }
 
 /// How much the standard errors exceed the estimate from the sampling and the sensitivities.
-const UNCERTAINTY_FACTOR: f64 = 1.5;
+const UNCERTAINTY_FACTOR: f64 = 1.25;
 
 /// The relative floor of the standard errors.
 const UNCERTAINTY_FLOOR: f64 = 1e-3;

@@ -221,4 +221,3 @@ pub(super) fn make_monotone(u: &mut [f64], weight: &[f64]) {
         }
     }
 }
-

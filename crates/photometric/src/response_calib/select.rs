@@ -166,7 +166,10 @@ fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, Ph
                     }
                 }
             }
-            let has = vals.iter().enumerate().any(|(i, &v)| train[i] && inside(i, v));
+            let has = vals
+                .iter()
+                .enumerate()
+                .any(|(i, &v)| train[i] && inside(i, v));
             for (i, &v) in vals.iter().enumerate() {
                 if fold[i] != f || !inside(i, v) || !has {
                     continue;
@@ -196,7 +199,11 @@ pub(super) fn choose(
     priors: bool,
 ) -> Result<(bool, f64, HeldOutScores), PhotometricError> {
     let (fold, k) = folds(base.exposures);
-    let scales: &[f64] = if priors { &PRIOR_SCALES } else { &PRIOR_SCALES[..1] };
+    let scales: &[f64] = if priors {
+        &PRIOR_SCALES
+    } else {
+        &PRIOR_SCALES[..1]
+    };
     let mut cands = Vec::new();
     let mut residuals = Vec::new();
     for &prior_scale in scales {
@@ -230,7 +237,11 @@ pub(super) fn choose(
     let mut chosen = 0;
     for c in 1..cands.len() {
         let weaker = cands[c].1 < cands[chosen].1;
-        let margin = if weaker { 1.0 - WEAKER_PRIOR_MARGIN } else { 1.0 };
+        let margin = if weaker {
+            1.0 - WEAKER_PRIOR_MARGIN
+        } else {
+            1.0
+        };
         if rms[c] < rms[chosen] * margin {
             chosen = c;
         }

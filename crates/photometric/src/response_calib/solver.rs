@@ -800,13 +800,6 @@ pub(super) fn solve(
         }
         u = nu;
         (set.progress)(iterations, delta);
-        if std::env::var_os("MONOVO_TRACE").is_some() {
-            eprintln!(
-                "  it {iterations} px {} change {delta:.4} obj {objective:.6e} damping {damping:.2e}{}",
-                p.samples.len(),
-                if worse { " (taken back)" } else { "" }
-            );
-        }
         // converged: the step is below the tolerance, or no step improves the accepted state
         // any more (the objective's rounding and the B' steps' own error bound it)
         if (!worse && delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS))

@@ -74,8 +74,18 @@ pub(super) fn standard_errors(
     let (_, b1) = u_system(&fit.u_prev, &fit.sums, &fit.penalty, 1.0);
     let d1 = chol.solve(&b1);
     let d10 = a10.cholesky().ok_or_else(singular)?.solve(&b10);
-    let u1: Vec<f64> = fit.u_prev.iter().zip(d1.iter()).map(|(a, b)| a + b).collect();
-    let u10: Vec<f64> = fit.u_prev.iter().zip(d10.iter()).map(|(a, b)| a + b).collect();
+    let u1: Vec<f64> = fit
+        .u_prev
+        .iter()
+        .zip(d1.iter())
+        .map(|(a, b)| a + b)
+        .collect();
+    let u10: Vec<f64> = fit
+        .u_prev
+        .iter()
+        .zip(d10.iter())
+        .map(|(a, b)| a + b)
+        .collect();
     let n1 = normalized(&extrapolate(&u1, first, last).0);
     let n10 = normalized(&extrapolate(&u10, first, last).0);
     // the continuation's part: the change with half the window
