@@ -42,7 +42,9 @@ def cli_error(*args) -> str:
     p = cli(*args, check=False)
     assert p.returncode != 0, p.stdout
     line = p.stderr.strip().splitlines()[-1]
-    return line[len("error: ") :] if line.startswith("error: ") else line
+    prefix = "monovo: error: "
+    assert line.startswith(prefix), line
+    return line[len(prefix) :]
 
 
 @pytest.fixture(scope="session")

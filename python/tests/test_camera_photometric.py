@@ -47,7 +47,11 @@ def test_unproject_project_round_trip(model, params):
     ok = ~np.isnan(rays).any(axis=1)
     assert ok.mean() > 0.9
     np.testing.assert_allclose(np.linalg.norm(rays[ok], axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(cam.project(rays[ok] * 3.0), px[ok], atol=1e-6)
+    back = cam.project(rays[ok] * 3.0)
+    # pixels beyond a wide-angle model's image circle may have rays that do not project back
+    good = ~np.isnan(back).any(axis=1)
+    assert good.mean() > 0.9
+    np.testing.assert_allclose(back[good], px[ok][good], atol=1e-6)
     # one point in, one point out
     assert cam.project([0.0, 0.0, 1.0]).shape == (2,)
     K = cam.K
@@ -88,7 +92,7 @@ def test_response_and_vignette_files(synth_sequence):
     png = np.asarray(Image.open(synth_sequence / "vignette.png")).astype(np.float64)
     v = monovo.Vignette.from_file(synth_sequence / "vignette.png")
     np.testing.assert_allclose(v.values, png / png.max(), rtol=1e-6)
-    with pytest.raises(monovo.FormatError, match="increasing"):
+    with pytest.raises(monovo.FormatError, match="strictly increase"):
         monovo.InverseResponse(np.r_[u.values[:100], u.values[99], u.values[101:]])
 
 

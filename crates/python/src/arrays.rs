@@ -57,9 +57,9 @@ pub fn output_arg(obj: &Bound<'_, PyAny>) -> PyResult<OutputMode> {
         )
     })?;
     match v[..] {
-        [fx, fy, cx, cy] | [fx, fy, cx, cy, 0.0] => {
-            Ok(format!("{fx} {fy} {cx} {cy} 0").parse::<OutputMode>().map_err(Error::from)?)
-        }
+        [fx, fy, cx, cy] | [fx, fy, cx, cy, 0.0] => Ok(format!("{fx} {fy} {cx} {cy} 0")
+            .parse::<OutputMode>()
+            .map_err(Error::from)?),
         _ => Err(Error::format(format!(
             "pinhole: expected four numbers (fx, fy, cx, cy), got {}",
             v.len()

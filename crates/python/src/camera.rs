@@ -3,7 +3,9 @@
 
 use std::path::PathBuf;
 
-use camera_model::{CalibrationFile, CalibrationFormat, CameraModel, ImageSize, OutputMode, RectifyMap};
+use camera_model::{
+    CalibrationFile, CalibrationFormat, CameraModel, ImageSize, OutputMode, RectifyMap,
+};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -40,9 +42,9 @@ pub fn read_camera_file(
     let ctx = |e: camera_model::CameraError| Error::from(e).context(&path.display().to_string());
     let cal = CalibrationFile::parse(&text).map_err(ctx)?;
     let index = match cal.format {
-        CalibrationFormat::EurocSensor | CalibrationFormat::CameraTxt | CalibrationFormat::Eth3d => {
-            0
-        }
+        CalibrationFormat::EurocSensor
+        | CalibrationFormat::CameraTxt
+        | CalibrationFormat::Eth3d => 0,
         _ => cam,
     };
     cal.camera_file(index, size).map_err(ctx)
@@ -59,9 +61,9 @@ fn rows_of(obj: &Bound<'_, PyAny>, k: usize, what: &str) -> PyResult<(Vec<f64>, 
     } else {
         a
     };
-    let arr: PyReadonlyArray2<'_, f64> = a.extract().map_err(|_| {
-        Error::format(format!("{what}: expected an N x {k} array of numbers"))
-    })?;
+    let arr: PyReadonlyArray2<'_, f64> = a
+        .extract()
+        .map_err(|_| Error::format(format!("{what}: expected an N x {k} array of numbers")))?;
     if arr.shape()[1] != k {
         return Err(Error::format(format!(
             "{what}: expected an N x {k} array, got shape {}",
@@ -77,7 +79,12 @@ fn rows_of(obj: &Bound<'_, PyAny>, k: usize, what: &str) -> PyResult<(Vec<f64>, 
 }
 
 /// `n` rows of `k` values as an array of shape (n, k), or (k,) for a single point.
-fn rows_to_py<'py>(py: Python<'py>, data: Vec<f64>, k: usize, single: bool) -> PyResult<Bound<'py, PyAny>> {
+fn rows_to_py<'py>(
+    py: Python<'py>,
+    data: Vec<f64>,
+    k: usize,
+    single: bool,
+) -> PyResult<Bound<'py, PyAny>> {
     let n = data.len() / k;
     let a = Array2::from_shape_vec((n, k), data).map_err(|e| Error::format(e.to_string()))?;
     let a = a.into_pyarray(py).into_any();
@@ -115,7 +122,13 @@ impl PyCamera {
     /// An ideal pinhole camera.
     #[staticmethod]
     #[pyo3(signature = (fx, fy, cx, cy, size=None))]
-    fn pinhole(fx: f64, fy: f64, cx: f64, cy: f64, size: Option<&Bound<'_, PyAny>>) -> PyResult<PyCamera> {
+    fn pinhole(
+        fx: f64,
+        fy: f64,
+        cx: f64,
+        cy: f64,
+        size: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyCamera> {
         PyCamera::new("pinhole", vec![fx, fy, cx, cy], size)
     }
 
@@ -155,7 +168,11 @@ impl PyCamera {
 
     /// Projects points in the camera frame, shape (N, 3) or (3,), to pixels, (N, 2) or (2,);
     /// NaN where a point does not project (behind the camera, outside the model's domain).
-    fn project<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn project<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let (data, single) = rows_of(points, 3, "points")?;
         let m = &self.model;
         let out = py.detach(|| {
@@ -168,7 +185,11 @@ impl PyCamera {
 
     /// Unprojects pixels, shape (N, 2) or (2,), to unit-length rays in the camera frame,
     /// (N, 3) or (3,); NaN where a pixel has no ray in the model.
-    fn unproject<'py>(&self, py: Python<'py>, pixels: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn unproject<'py>(
+        &self,
+        py: Python<'py>,
+        pixels: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let (data, single) = rows_of(pixels, 2, "pixels")?;
         let m = &self.model;
         let out = py.detach(|| {
@@ -180,9 +201,9 @@ impl PyCamera {
     }
 
     fn __repr__(&self) -> String {
-        let size = self
-            .size
-            .map_or(String::new(), |s| format!(", size=({}, {})", s.width, s.height));
+        let size = self.size.map_or(String::new(), |s| {
+            format!(", size=({}, {})", s.width, s.height)
+        });
         format!(
             "Camera({:?}, {:?}{size})",
             model_name(&self.model),
@@ -199,7 +220,9 @@ impl PyCamera {
         let me = slf.get();
         let cls = slf.get_type();
         let size = me.size();
-        (cls, (me.model(), me.params(), size)).into_pyobject(py).map(|t| t.into_any())
+        (cls, (me.model(), me.params(), size))
+            .into_pyobject(py)
+            .map(|t| t.into_any())
     }
 }
 
@@ -230,7 +253,9 @@ impl PyRectifier {
         let model = camera.model.clone();
         let map = py
             .detach(|| RectifyMap::for_mode(&model, in_size, &output, out_size))
-            .map_err(|e| Error::from(e).context(&format!("output camera `{output}` at {out_size}")))?;
+            .map_err(|e| {
+                Error::from(e).context(&format!("output camera `{output}` at {out_size}"))
+            })?;
         Ok(PyRectifier {
             map,
             input: camera,
@@ -251,7 +276,10 @@ impl PyRectifier {
         pinhole: Option<&Bound<'_, PyAny>>,
         size: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyRectifier> {
-        let output = pinhole.map(output_arg).transpose()?.unwrap_or(OutputMode::Crop);
+        let output = pinhole
+            .map(output_arg)
+            .transpose()?
+            .unwrap_or(OutputMode::Crop);
         let size = size.map(size_arg).transpose()?;
         PyRectifier::build(py, camera.clone(), output, size)
     }
@@ -330,7 +358,11 @@ impl PyRectifier {
 
     /// Rectifies an H x W image of uint8, uint16 or float32 (same dtype out; float32 NaN
     /// stays NaN and poisons its neighbours, as the photometric correction needs).
-    fn __call__<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn __call__<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let map = &self.map;
         if let Ok(a) = image.extract::<PyReadonlyArray2<'_, u8>>() {
             let img = image_from_py(&a)?;
@@ -347,10 +379,10 @@ impl PyRectifier {
             let out = py.detach(|| map.remap_f32(&img)).map_err(Error::from)?;
             return Ok(image_to_py(py, out).into_any());
         }
-        Err(Error::format(
-            "image: expected a 2-D numpy array of uint8, uint16 or float32 (H x W)",
+        Err(
+            Error::format("image: expected a 2-D numpy array of uint8, uint16 or float32 (H x W)")
+                .into(),
         )
-        .into())
     }
 
     fn __repr__(&self) -> String {

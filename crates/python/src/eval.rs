@@ -131,7 +131,10 @@ pub fn ground_truth(input: &Input, cam: usize) -> Result<GroundTruth> {
                 )));
             }
             let times = rows.iter().map(|r| r[0]).collect();
-            let positions = rows.iter().map(|r| Vector3::new(r[1], r[2], r[3])).collect();
+            let positions = rows
+                .iter()
+                .map(|r| Vector3::new(r[1], r[2], r[3]))
+                .collect();
             GroundTruth::from_rows(times, positions)
                 .map_err(|e| Error::from_chain(&e).context("the ground truth"))
         }
@@ -251,7 +254,12 @@ impl PyEvaluation {
     /// The evaluated positions in the estimate's frame, shape (N, 3).
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let flat: Vec<f64> = self.e.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        let flat: Vec<f64> = self
+            .e
+            .positions
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
         Array2::from_shape_vec((self.e.positions.len(), 3), flat)
             .unwrap_or_default()
             .into_pyarray(py)
@@ -362,7 +370,9 @@ fn evaluate_many(
     };
     let results = py.detach(|| -> Result<Vec<Evaluation>> {
         match threads {
-            Some(0) => Err(Error::format("threads=0: give at least 1, or None for all cores")),
+            Some(0) => Err(Error::format(
+                "threads=0: give at least 1, or None for all cores",
+            )),
             Some(n) => rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
                 .build()
@@ -385,14 +395,24 @@ fn read_trajectory<'py>(
     times: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let format = parse_format(format)?;
-    let t = py.detach(|| load_trajectory(&path, format, times.as_deref()))
+    let t = py
+        .detach(|| load_trajectory(&path, format, times.as_deref()))
         .map_err(Error::from)?;
     let flat: Vec<f64> = t
         .poses
         .iter()
         .flat_map(|p| {
             let q = p.orientation.coords; // i j k w
-            [p.t, p.position.x, p.position.y, p.position.z, q[0], q[1], q[2], q[3]]
+            [
+                p.t,
+                p.position.x,
+                p.position.y,
+                p.position.z,
+                q[0],
+                q[1],
+                q[2],
+                q[3],
+            ]
         })
         .collect();
     Ok(Array2::from_shape_vec((t.poses.len(), 8), flat)

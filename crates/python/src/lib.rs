@@ -20,10 +20,7 @@ mod sequence;
 #[pymodule]
 fn _monovo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    m.add(
-        "JPEG_DECODER",
-        dataset_io::JPEG_DECODER,
-    )?;
+    m.add("JPEG_DECODER", dataset_io::JPEG_DECODER)?;
     eval::register(m)?;
     sequence::register(m)?;
     camera::register(m)?;

@@ -62,7 +62,11 @@ impl PyInverseResponse {
     }
     /// `U` of every pixel of a uint8 (or, for a table of `2^k` values, uint16 of k bits)
     /// image, float64.
-    fn __call__<'py>(&self, py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn __call__<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let table: &[f64] = if image.extract::<PyReadonlyArray2<'_, u8>>().is_ok() {
             self.u.values()
         } else {
@@ -73,7 +77,9 @@ impl PyInverseResponse {
         let idx = np.call_method1("asarray", (image,))?;
         let kind: String = idx.getattr("dtype")?.getattr("kind")?.extract()?;
         if kind != "u" {
-            return Err(Error::format("image: expected an array of uint8 or uint16 grey values").into());
+            return Err(
+                Error::format("image: expected an array of uint8 or uint16 grey values").into(),
+            );
         }
         let top: u64 = idx.call_method0("max")?.extract().unwrap_or(0);
         if top as usize >= table.len() {
@@ -155,8 +161,9 @@ impl PyVignette {
 fn options<T: DeserializeOwned + Default>(json: Option<&str>, what: &str) -> Result<T> {
     match json {
         None => Ok(T::default()),
-        Some(j) => serde_json::from_str(j)
-            .map_err(|e| Error::format(format!("{what} options: {e}"))),
+        Some(j) => {
+            serde_json::from_str(j).map_err(|e| Error::format(format!("{what} options: {e}")))
+        }
     }
 }
 
@@ -200,7 +207,10 @@ fn _calibrate_response(
     let (Some(frames), Some(exposures)) = (frames, exposures_ms) else {
         return Err(Error::format("give a sweep folder, or frames and exposures_ms").into());
     };
-    let exposures = exposures.as_slice().map_err(|e| Error::format(e.to_string()))?.to_vec();
+    let exposures = exposures
+        .as_slice()
+        .map_err(|e| Error::format(e.to_string()))?
+        .to_vec();
     if frames.len() != exposures.len() {
         return Err(Error::format(format!(
             "{} frames but {} exposures",
@@ -215,7 +225,9 @@ fn _calibrate_response(
             .iter()
             .map(|f| image_from_py(&f.extract::<PyReadonlyArray2<'_, u16>>()?).map_err(PyErr::from))
             .collect::<PyResult<Vec<_>>>()?;
-        py.detach(|| photometric::calibrate_response_deep(&imgs, bits, &exposures, &opts, &|_, _| {}))
+        py.detach(|| {
+            photometric::calibrate_response_deep(&imgs, bits, &exposures, &opts, &|_, _| {})
+        })
     } else {
         let mut imgs = frames
             .iter()
@@ -230,7 +242,8 @@ fn _calibrate_response(
 /// Response options, parsed and checked before any work.
 fn options_checked(json: Option<&str>) -> Result<ResponseOptions> {
     let o: ResponseOptions = options(json, "response")?;
-    o.check().map_err(|e| Error::from(e).context("response options"))?;
+    o.check()
+        .map_err(|e| Error::from(e).context("response options"))?;
     Ok(o)
 }
 

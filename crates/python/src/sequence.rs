@@ -119,14 +119,13 @@ impl Inner {
             )) {
                 warnings.push(format!("{}: {w}", camera_path.display()));
             }
-            let map = RectifyMap::for_mode(&cam.input, cam.input_size, &mode, out_size).map_err(
-                |e| {
+            let map =
+                RectifyMap::for_mode(&cam.input, cam.input_size, &mode, out_size).map_err(|e| {
                     Error::from(e).context(&format!(
                         "{}: output camera `{mode}` at {out_size}",
                         camera_path.display()
                     ))
-                },
-            )?;
+                })?;
             if mode == OutputMode::Crop && map.invalid_count() > 0 {
                 warnings.push(format!(
                     "{}: `crop` at {out_size} leaves {} output pixels without a source (0 in every frame); a smaller size or another pinhole avoids them",
@@ -419,7 +418,10 @@ impl PySequence {
             cam,
             calib,
             rectify,
-            pinhole: pinhole.filter(|o| !o.is_none()).map(output_arg).transpose()?,
+            pinhole: pinhole
+                .filter(|o| !o.is_none())
+                .map(output_arg)
+                .transpose()?,
             size: opt_size(size)?,
             photometric,
             irradiance,
@@ -513,14 +515,24 @@ impl PySequence {
     /// Timestamps in seconds, shape (N,).
     #[getter]
     fn timestamps<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let t: Vec<f64> = self.inner.seq.times().rows.iter().map(|r| r.timestamp).collect();
+        let t: Vec<f64> = self
+            .inner
+            .seq
+            .times()
+            .rows
+            .iter()
+            .map(|r| r.timestamp)
+            .collect();
         PyArray1::from_vec(py, t)
     }
     /// Timestamps in integer nanoseconds, shape (N,) int64, when the dataset gives every one
     /// exactly; else `None`.
     #[getter]
     fn timestamps_ns<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<i64>>> {
-        self.inner.seq.timestamps_ns().map(|v| PyArray1::from_vec(py, v))
+        self.inner
+            .seq
+            .timestamps_ns()
+            .map(|v| PyArray1::from_vec(py, v))
     }
     /// Exposure times in ms, shape (N,), NaN where unknown.
     #[getter]
@@ -588,7 +600,9 @@ impl PySequence {
             ("vignette", s.vignette_path.clone()),
             (
                 "ground_truth",
-                s.ground_truth_path.clone().or(s.dataset_ground_truth.clone()),
+                s.ground_truth_path
+                    .clone()
+                    .or(s.dataset_ground_truth.clone()),
             ),
             ("calibration", s.camera_path().map(Path::to_path_buf)),
             ("times", Some(s.times_path().to_path_buf())),
@@ -633,7 +647,9 @@ impl PySequence {
             o.mask_saturated,
             o.bit_depth,
         );
-        (slf.get_type(), args).into_pyobject(py).map(|t| t.into_any())
+        (slf.get_type(), args)
+            .into_pyobject(py)
+            .map(|t| t.into_any())
     }
 
     fn __repr__(&self) -> String {
