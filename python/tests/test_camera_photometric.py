@@ -125,3 +125,21 @@ def test_response_calibration_equals_the_cli(sweep, tmp_path):
     assert few.iterations <= 2
     with pytest.raises(monovo.FormatError, match="max_iteration"):
         monovo.calibrate_response(sweep, options={"max_iteration": 2})
+
+
+def test_vignette_calibration_equals_the_cli(tmp_path):
+    seq = tmp_path / "wall"
+    cli("synth", "vignette", "-o", seq, "--size", "160x128", "--frames", 60, "--png", "--seed", 2)
+    out = tmp_path / "vignette.png"
+    want = cli_json("calib", "vignette", seq, "-o", out, "--max-iterations", 8)
+    cal = monovo.calibrate_vignette(seq, options={"max_iterations": 8})
+    assert cal.frames == 60 and cal.frames_used == want["frames_used"]
+    assert cal.vignette.shape == (128, 160) and cal.vignette.dtype == np.float32
+    assert cal.std_error.shape == (128, 160) and cal.counts.shape == (128, 160)
+    # the map the command writes: round(V * 65535) of the same float32 values
+    png = np.asarray(Image.open(out)).astype(np.float64)
+    q = np.floor((cal.vignette * np.float32(65535)).astype(np.float64) + 0.5)
+    np.testing.assert_array_equal(q, png)
+    assert cal.iterations == want["iterations"]
+    with pytest.raises(monovo.FormatError, match="grid_size"):
+        monovo.calibrate_vignette(seq, options={"grid_size": 3})
