@@ -94,7 +94,7 @@ def from_evo(trajectory: Any) -> _np.ndarray:
 def to_evo(trajectory: TrajectoryLike) -> Any:
     """An N x 8 array ``t x y z qx qy qz qw`` (or a trajectory file, read as
     :func:`read_trajectory` reads it) as an evo ``PoseTrajectory3D`` (needs evo)."""
-    from evo.core.trajectory import PoseTrajectory3D  # optional dependency
+    from evo.core.trajectory import PoseTrajectory3D  # type: ignore[import-untyped, unused-ignore]
 
     if isinstance(trajectory, (str, _os.PathLike)):
         trajectory = read_trajectory(trajectory)
@@ -163,6 +163,9 @@ class _Result:
         for k, v in data.items():
             setattr(self, k, _convert(v))
 
+    def __getattr__(self, name: str) -> Any:  # the fields, set in __init__
+        raise AttributeError(f"{type(self).__name__} has no field `{name}` (keys() lists them)")
+
     def to_dict(self) -> dict:
         """The result as the library serialises it (JSON types; ``None`` for non-finite)."""
         return self._data
@@ -201,6 +204,8 @@ class ResponseCalibration(_Result):
     and every other field of the library's result (iterations, convergence, the noise
     model, ... : ``keys()`` lists them). ``frames`` is the number of frames used."""
 
+    frames: int
+
 
 class VignetteCalibration(_Result):
     """The result of :func:`calibrate_vignette`: ``vignette`` (the map recommended for
@@ -208,6 +213,9 @@ class VignetteCalibration(_Result):
     ``std_error`` and ``raw_std_error`` (per pixel), ``counts``, and every other field of the
     library's result (``keys()`` lists them). ``frames_used`` and ``frames`` count the frames
     with a plane pose and in the sequence."""
+
+    frames_used: int
+    frames: int
 
 
 def response_options() -> dict:

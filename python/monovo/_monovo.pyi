@@ -2,7 +2,8 @@
 ``monovo``; see its docstrings and docs/python.md."""
 
 import os
-from typing import Any, Dict, Iterator, List, Optional, Sequence as _Seq, Tuple, Union, overload
+from pathlib import Path
+from typing import Any, Dict, Iterator, List, Optional, Sequence as _Seq, Tuple, Union, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -11,9 +12,29 @@ _Path = Union[str, "os.PathLike[str]"]
 _Size = Union[Tuple[int, int], _Seq[int], str]
 _Pinhole = Union[str, _Seq[float]]
 
+__all__ = [
+    "__version__",
+    "JPEG_DECODER",
+    "Evaluation",
+    "evaluate",
+    "evaluate_many",
+    "read_trajectory",
+    "Sequence",
+    "Frame",
+    "FrameIterator",
+    "Camera",
+    "Rectifier",
+    "InverseResponse",
+    "Vignette",
+    "_default_options",
+    "_calibrate_response",
+    "_calibrate_vignette",
+]
+
 __version__: str
 JPEG_DECODER: str
 
+@final
 class Evaluation:
     """One evaluated run: the keys of ``monovo eval --json`` as attributes (metrics are
     ``inf`` where the JSON has ``null``)."""
@@ -72,10 +93,11 @@ def read_trajectory(
     path: _Path, format: Optional[str] = None, times: Optional[_Path] = None
 ) -> npt.NDArray[np.float64]: ...
 
+@final
 class Camera:
     """A camera model in pixels (pixel centres at integer coordinates)."""
 
-    def __init__(self, model: str, params: _Seq[float], size: Optional[_Size] = None) -> None: ...
+    def __new__(cls, model: str, params: _Seq[float], size: Optional[_Size] = None) -> "Camera": ...
     @staticmethod
     def from_file(path: _Path, cam: int = 0, size: Optional[_Size] = None) -> "Camera": ...
     @staticmethod
@@ -97,12 +119,13 @@ class Camera:
     def project(self, points: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
     def unproject(self, pixels: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
 
+@final
 class Rectifier:
     """The rectification of ``monovo rectify`` from a camera to a pinhole view."""
 
-    def __init__(
-        self, camera: Camera, pinhole: Optional[_Pinhole] = None, size: Optional[_Size] = None
-    ) -> None: ...
+    def __new__(
+        cls, camera: Camera, pinhole: Optional[_Pinhole] = None, size: Optional[_Size] = None
+    ) -> "Rectifier": ...
     @staticmethod
     def from_file(
         path: _Path, cam: int = 0, pinhole: Optional[_Pinhole] = None, size: Optional[_Size] = None
@@ -128,6 +151,7 @@ class Rectifier:
     @overload
     def __call__(self, image: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]: ...
 
+@final
 class Frame:
     """One frame of a :class:`Sequence`."""
 
@@ -144,16 +168,18 @@ class Frame:
     @property
     def timestamp_ns(self) -> Optional[int]: ...
 
+@final
 class FrameIterator(Iterator[Frame]):
     def __iter__(self) -> "FrameIterator": ...
     def __next__(self) -> Frame: ...
     def __len__(self) -> int: ...
 
+@final
 class Sequence:
     """A sequence folder of any layout monovo reads, as frames."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         path: _Path,
         cam: int = 0,
         calib: Optional[_Path] = None,
@@ -164,12 +190,12 @@ class Sequence:
         irradiance: bool = False,
         mask_saturated: bool = False,
         bit_depth: Optional[int] = None,
-    ) -> None: ...
+    ) -> "Sequence": ...
     def __len__(self) -> int: ...
     @overload
-    def __getitem__(self, key: int) -> Frame: ...
+    def __getitem__(self, key: int, /) -> Frame: ...
     @overload
-    def __getitem__(self, key: slice) -> List[Frame]: ...
+    def __getitem__(self, key: slice, /) -> List[Frame]: ...
     def __iter__(self) -> FrameIterator: ...
     def frames(
         self,
@@ -179,7 +205,7 @@ class Sequence:
         prefetch: Optional[int] = None,
     ) -> FrameIterator: ...
     @property
-    def path(self) -> str: ...
+    def path(self) -> Path: ...
     @property
     def layout(self) -> str: ...
     @property
@@ -203,15 +229,16 @@ class Sequence:
     @property
     def dtype(self) -> str: ...
     @property
-    def files(self) -> Dict[str, Optional[str]]: ...
+    def files(self) -> Dict[str, Optional[Path]]: ...
     @property
     def warnings(self) -> List[str]: ...
     def ground_truth(self) -> npt.NDArray[np.float64]: ...
 
+@final
 class InverseResponse:
     """The inverse response ``U`` (pcalib.txt)."""
 
-    def __init__(self, values: _Seq[float]) -> None: ...
+    def __new__(cls, values: _Seq[float]) -> "InverseResponse": ...
     @staticmethod
     def from_file(path: _Path) -> "InverseResponse": ...
     @staticmethod
@@ -224,10 +251,11 @@ class InverseResponse:
     def __call__(self, image: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
     def __len__(self) -> int: ...
 
+@final
 class Vignette:
     """The vignette ``V`` (vignette.png), max 1."""
 
-    def __init__(self, values: npt.NDArray[np.float32]) -> None: ...
+    def __new__(cls, values: npt.NDArray[np.float32]) -> "Vignette": ...
     @staticmethod
     def from_file(path: _Path) -> "Vignette": ...
     @property
@@ -238,17 +266,17 @@ class Vignette:
 
 def _default_options(kind: str) -> str: ...
 def _calibrate_response(
-    sequence: Optional[str],
-    frames: Optional[List[npt.NDArray[Any]]],
-    exposures_ms: Optional[npt.NDArray[np.float64]],
-    options: Optional[str],
-    bit_depth: Optional[int],
+    sequence: Optional[str] = None,
+    frames: Optional[List[npt.NDArray[Any]]] = None,
+    exposures_ms: Optional[npt.NDArray[np.float64]] = None,
+    options: Optional[str] = None,
+    bit_depth: Optional[int] = None,
 ) -> Tuple[str, int]: ...
 def _calibrate_vignette(
     sequence: str,
-    pcalib: Optional[str],
-    poses: Optional[str],
-    marker_id: int,
-    bit_depth: Optional[int],
-    options: Optional[str],
+    pcalib: Optional[str] = None,
+    poses: Optional[str] = None,
+    marker_id: int = 213,
+    bit_depth: Optional[int] = None,
+    options: Optional[str] = None,
 ) -> Tuple[str, int, int]: ...

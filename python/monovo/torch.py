@@ -20,8 +20,8 @@ import math
 from typing import Any, Union
 
 import numpy as np
-import torch
-from torch.utils.data import Dataset
+import torch  # type: ignore[import-not-found, unused-ignore]
+from torch.utils.data import Dataset  # type: ignore[import-not-found, unused-ignore]
 
 from . import Sequence
 

@@ -302,9 +302,12 @@ impl PyFrame {
         let img = self.image.bind(py);
         let shape = img.getattr("shape").map_or("?".into(), |s| s.to_string());
         let dtype = img.getattr("dtype").map_or("?".into(), |s| s.to_string());
+        let exposure = self
+            .exposure_ms
+            .map_or("None".to_string(), |e| format!("{e:?}"));
         format!(
-            "Frame(index={}, name={:?}, timestamp={}, exposure_ms={:?}, image={dtype}{shape})",
-            self.index, self.name, self.timestamp, self.exposure_ms
+            "Frame(index={}, name={:?}, timestamp={:?}, exposure_ms={exposure}, image={dtype}{shape})",
+            self.index, self.name, self.timestamp
         )
     }
 }
