@@ -223,3 +223,11 @@ def test_torch_dataset_without_torch_installed(synth_sequence, monkeypatch):
     np.testing.assert_array_equal(item["K"][1], ds.sequence.camera.K)
     back = pickle.loads(pickle.dumps(ds))
     np.testing.assert_array_equal(back[2]["image"][1], item["image"][1])
+
+
+def test_ground_truth_of_a_sequence(synth_sequence):
+    seq = monovo.Sequence(synth_sequence)
+    gt = seq.ground_truth()
+    rows = np.loadtxt(synth_sequence / "groundtruthSync.txt")
+    np.testing.assert_array_equal(gt, rows[:, :4])
+    assert seq.files["ground_truth"] == synth_sequence / "groundtruthSync.txt"
