@@ -35,14 +35,30 @@
 //! ```
 #![deny(missing_docs)]
 
+mod align;
+mod ape;
+mod association;
 mod batch;
 mod evaluate;
+mod evo_result;
+mod kitti;
+mod pose;
+mod pyrandom;
+mod rpe;
 mod sim3;
+mod stats;
 mod table;
 mod trajectory;
+mod tum;
 
 pub use nalgebra;
 
+pub use align::{align_track, align_yaw, AlignMode, AlignOptions, AlignTransform};
+pub use ape::{ape, ApeOptions, ApeResult, PoseRelation};
+pub use association::{
+    evo_pairs, evo_sync, find_closest_index, interpolate, matching_time_indices, slerp,
+    tum_associate, SyncMethod, SyncOptions,
+};
 pub use batch::{
     cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
     DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
@@ -50,12 +66,24 @@ pub use batch::{
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
-pub use sim3::{align_sim3, principal_plane, rotation_angle, AlignFailure, Alignment, Sim3};
+pub use evo_result::{evo_result_entries, npy_bytes, EvoResultInfo, NamedArray};
+pub use kitti::{kitti_errors, KittiLengthError, KittiResult, KittiSegment, KITTI_LENGTHS};
+pub use pose::{
+    evo_rotation_angle, parse_kitti_poses, quaternion_matrix, rotvec_angle, scipy_quaternion,
+    PoseTrack, Se3,
+};
+pub use pyrandom::PyRandom;
+pub use rpe::{rpe, DeltaUnit, RpeOptions, RpeResult};
+pub use sim3::{
+    align_sim3, principal_plane, rotation_angle, umeyama, AlignFailure, Alignment, Sim3,
+};
+pub use stats::{pairwise_sum, ErrorStats};
 pub use table::{markdown_table, summary_table, TableStyle, TABLE_CAPTION};
 pub use trajectory::{
     detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,
     TrajectoryFormat,
 };
+pub use tum::{tum_ate, tum_rpe, TumAteOptions, TumDeltaUnit, TumResult, TumRpeOptions};
 
 /// Errors for unusable input (a malformed line, an empty or disordered ground truth). A run
 /// that is merely bad (empty, NaN, lost tracking) is not an error: see [`FailReason`].
@@ -129,4 +157,70 @@ pub enum EvalError {
         /// Number of timestamp lines.
         times: usize,
     },
+}
+
+/// Why a trajectory metric (APE, RPE, the KITTI segment errors) could not be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MetricError {
+    /// A trajectory without poses.
+    #[error("the {0} has no poses")]
+    Empty(&'static str),
+    /// A pose with a NaN or infinite number.
+    #[error("the {which}'s pose {} (in file order) contains NaN or infinity", index + 1)]
+    NonFinite {
+        /// `reference` or `estimate`.
+        which: &'static str,
+        /// 0-based index of the pose.
+        index: usize,
+    },
+    /// Association by time needs timestamps.
+    #[error("the trajectories have no timestamps to associate (KITTI pose files pair by line)")]
+    Unstamped,
+    /// No pose of one trajectory has a partner in the other.
+    #[error("found no matching timestamps between the reference and the estimate with max. time difference {max_diff} s and time offset {offset} s")]
+    NoMatches {
+        /// The tolerance.
+        max_diff: f64,
+        /// The offset added to the estimate's stamps.
+        offset: f64,
+    },
+    /// Poses paired by line (no timestamps) need as many in both trajectories.
+    #[error("the reference has {reference} poses and the estimate {estimate}; without timestamps poses pair by line and the counts must agree")]
+    LengthMismatch {
+        /// Reference poses.
+        reference: usize,
+        /// Estimated poses.
+        estimate: usize,
+    },
+    /// Interpolation needs two poses.
+    #[error("cannot interpolate a trajectory of {0} pose(s)")]
+    TooFewToInterpolate(usize),
+    /// The alignment failed.
+    #[error("alignment: {0}")]
+    Align(AlignFailure),
+    /// No pose pairs for the relative error.
+    #[error("delta = {delta} ({unit}) produced no pose pairs; try a smaller delta or a looser tolerance")]
+    NoPairs {
+        /// The delta.
+        delta: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
+    /// Too few compared pairs (the TUM scripts need two).
+    #[error("only {0} pose pair(s) could be compared, at least 2 are needed")]
+    TooFewPairs(usize),
+    /// A rotation matrix with a non-positive determinant (a reflection), where an angle is
+    /// needed.
+    #[error("pose {} of the {which} has a rotation matrix with non-positive determinant {det}", index + 1)]
+    NotARotation {
+        /// `reference` or `estimate`.
+        which: &'static str,
+        /// 0-based index of the pose.
+        index: usize,
+        /// The determinant.
+        det: f64,
+    },
+    /// An option value that cannot be used.
+    #[error("{0}")]
+    Option(String),
 }

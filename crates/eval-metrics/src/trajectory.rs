@@ -74,7 +74,7 @@ pub enum TrajectoryFormat {
 
 const MAX_FOUND: usize = 120;
 
-fn excerpt(line: &str) -> String {
+pub(crate) fn excerpt(line: &str) -> String {
     let t = line.trim();
     if t.len() <= MAX_FOUND {
         t.to_string()
@@ -89,7 +89,7 @@ fn excerpt(line: &str) -> String {
 
 /// Iterates the data lines of a text: 1-based line number and content, skipping blank lines
 /// and `#` comments (and a UTF-8 byte-order mark at the start).
-fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+pub(crate) fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     text.lines().enumerate().filter_map(|(i, l)| {
         let t = l.trim();
@@ -127,7 +127,7 @@ fn line_error(line_no: usize, line: &str, expected: &'static str, n: usize) -> E
 
 /// Parses exactly `N` numbers (or at least `N` when `allow_more`) separated by whitespace or
 /// commas. NaN and infinities parse (the evaluation decides what they mean).
-fn parse_fields<const N: usize>(
+pub(crate) fn parse_fields<const N: usize>(
     line_no: usize,
     line: &str,
     expected: &'static str,
