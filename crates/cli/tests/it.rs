@@ -9,5 +9,6 @@ mod experiment;
 mod exposure;
 mod faults;
 mod figures;
+mod metrics;
 mod rectify;
 mod terminal;
