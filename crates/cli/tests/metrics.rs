@@ -258,6 +258,21 @@ fn evo_spellings_and_combined_flags_agree() {
             "angle-deg"
         ])
     );
+    // a repeated option: the last one wins, as in evo
+    assert_eq!(
+        base,
+        run(&[
+            "-as",
+            "-r",
+            "full",
+            "-d",
+            "0.2",
+            "-u",
+            "m",
+            "-r",
+            "angle_deg"
+        ])
+    );
     // evo's format word and --n_to_align -1 (all)
     let mut v = vec!["ape", "tum", GT, EST, "-as", "--n_to_align", "-1", "--json"];
     let a = stdout(&run_in_repo(&v));

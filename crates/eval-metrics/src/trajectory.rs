@@ -254,7 +254,8 @@ pub fn parse_euroc(text: &str) -> Result<Trajectory, EvalError> {
         )?;
         check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
-            t: v[0] * 1e-9,
+            // nanoseconds to seconds as evo does (a division: exact for exact values)
+            t: v[0] / 1e9,
             position: Vector3::new(v[1], v[2], v[3]),
             orientation: Quaternion::new(v[4], v[5], v[6], v[7]),
         });

@@ -9,7 +9,10 @@ use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArg, SyncArgs}
 
 /// Arguments of `monovo ape`.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "\
+// repeated options: the last one wins, as in evo (argparse)
+#[command(
+    args_override_self = true,
+    after_help = "\
 Examples (evo's flags, kebab-case or evo's underscores):
   monovo ape groundtruth.txt estimate.txt -as            # evo_ape tum gt est -as
   monovo ape tum gt.txt est.txt -a -r angle_deg --json
@@ -28,7 +31,8 @@ max, sse, and the count n.
 
 --tum follows evaluate_ate.py instead: greedy one-to-one association within 0.02 s (strictly
 below; --t-max-diff, --t-offset), the estimate scaled by --scale, Horn's SE(3) alignment
-always, the distances between the positions. See docs/evaluation-metrics.md.")]
+always, the distances between the positions. See docs/evaluation-metrics.md."
+)]
 pub struct Args {
     #[command(flatten)]
     pub inputs: Inputs,

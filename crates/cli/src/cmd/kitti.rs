@@ -11,7 +11,10 @@ use crate::plot;
 
 /// Arguments of `monovo kitti`.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "\
+// repeated options: the last one wins, as in evo (argparse)
+#[command(
+    args_override_self = true,
+    after_help = "\
 Examples:
   monovo kitti poses/00.txt results/00.txt
   monovo kitti poses/ results/ --json             # every NN.txt of results/, pooled
@@ -24,7 +27,8 @@ error |t| / L and the rotation error angle / L; the means over all segments (of 
 sequences) are reported in percent and in degrees per 100 m, with the per-length means of the
 lengths that have at least 3 segments. The arithmetic is the devkit's single precision.
 The devkit does not align; -a / -s / -as (evo's Umeyama over all poses) may be given for
-monocular runs.")]
+monocular runs."
+)]
 pub struct Args {
     /// The ground truth: a KITTI pose file, or a folder of NN.txt.
     pub gt: PathBuf,

@@ -26,7 +26,10 @@ pub enum UnitArg {
 
 /// Arguments of `monovo rpe`.
 #[derive(clap::Args, Debug)]
-#[command(after_help = "\
+// repeated options: the last one wins, as in evo (argparse)
+#[command(
+    args_override_self = true,
+    after_help = "\
 Examples (evo's flags, kebab-case or evo's underscores):
   monovo rpe gt.txt est.txt                           # evo_rpe tum gt est: 1 frame apart
   monovo rpe gt.txt est.txt -as --delta 10 --delta_unit m --all_pairs --json
@@ -45,7 +48,8 @@ estimate, a pair ending at the last pose dropped, each pose given the nearest gr
 stamp (skipped beyond twice the median ground-truth interval), the error dP dQ^-1 (motions
 compared in the end frame) with translational and rotational (degrees) statistics. With
 --all-pairs, every pair, 10,000 random ones (Python 2's generator, seed 0) beyond 100 poses.
-See docs/evaluation-metrics.md.")]
+See docs/evaluation-metrics.md."
+)]
 pub struct Args {
     #[command(flatten)]
     pub inputs: Inputs,
