@@ -111,9 +111,13 @@ pub fn align_yaw(est: &[Vector3<f64>], gt: &[Vector3<f64>]) -> Result<Se3, Metri
         c += (e - me) * (g - mg).transpose();
     }
     let r = rot_z(best_yaw(&c));
+    let translation = mg - r * me;
+    if !(r.iter().all(|v| v.is_finite()) && translation.iter().all(|v| v.is_finite())) {
+        return Err(MetricError::Align(crate::AlignFailure::NonFinite));
+    }
     Ok(Se3 {
         rotation: r,
-        translation: mg - r * me,
+        translation,
     })
 }
 
@@ -205,7 +209,11 @@ fn transform(track: &mut PoseTrack, r: &Matrix3<f64>, t: &Vector3<f64>, s: f64) 
     for m in &mut track.rotations {
         *m = r * *m;
     }
-    let q = nalgebra::UnitQuaternion::from_matrix(r).into_inner();
+    // closed form (nalgebra's iterative `from_matrix` does not return on NaN)
+    let q = nalgebra::UnitQuaternion::from_rotation_matrix(
+        &nalgebra::Rotation3::from_matrix_unchecked(*r),
+    )
+    .into_inner();
     for x in &mut track.quaternions {
         *x = q * *x;
     }

@@ -232,6 +232,9 @@ pub fn parse_kitti_poses(text: &str) -> Result<PoseTrack, EvalError> {
 /// identity) is first replaced by its nearest orthogonal matrix `U V^T`, then Markley's method
 /// picks the best-conditioned of four formulas, and the result is normalised.
 pub fn scipy_quaternion(m: &Matrix3<f64>) -> [f64; 4] {
+    if !m.iter().all(|v| v.is_finite()) {
+        return [f64::NAN; 4];
+    }
     let g = m * m.transpose();
     let orthogonal = (0..3).all(|i| {
         (0..3).all(|j| {
@@ -243,10 +246,10 @@ pub fn scipy_quaternion(m: &Matrix3<f64>) -> [f64; 4] {
     let m = if orthogonal {
         *m
     } else {
-        let svd = m.svd(true, true);
-        match (svd.u, svd.v_t) {
-            (Some(u), Some(v_t)) => u * v_t,
-            _ => *m,
+        // the polar factor U V^T (scipy: LAPACK's SVD; ours by Jacobi rotations, as accurate)
+        match crate::sim3::jacobi_svd3(m) {
+            Some((u, _, v)) => u * v.transpose(),
+            None => *m,
         }
     };
     let tr = m[(0, 0)] + m[(1, 1)] + m[(2, 2)];

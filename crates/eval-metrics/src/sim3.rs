@@ -158,6 +158,10 @@ const DEGENERATE_RATIO: f64 = 1e-10;
 /// Whether the scatter matrix of a point set spans at least a plane: its second largest
 /// eigenvalue is not negligible against the largest.
 fn spans_a_plane(scatter: Matrix3<f64>) -> bool {
+    // nalgebra's eigen solver does not return on NaN or infinite entries
+    if !scatter.iter().all(|v| v.is_finite()) {
+        return false;
+    }
     let mut ev: Vec<f64> = SymmetricEigen::new(scatter)
         .eigenvalues
         .iter()
@@ -271,7 +275,7 @@ pub fn umeyama(
 /// 9.1e-6 (2.6e-12 relative, whatever its `eps`), LAPACK's (numpy's) by 4.6e-10 and this one by
 /// 3.7e-10, and the Umeyama rotation it gives differs from evo's by 3e-7. `None` for a
 /// non-finite matrix.
-fn jacobi_svd3(a: &Matrix3<f64>) -> Option<(Matrix3<f64>, Vector3<f64>, Matrix3<f64>)> {
+pub(crate) fn jacobi_svd3(a: &Matrix3<f64>) -> Option<(Matrix3<f64>, Vector3<f64>, Matrix3<f64>)> {
     if !a.iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -328,12 +332,20 @@ fn jacobi_svd3(a: &Matrix3<f64>) -> Option<(Matrix3<f64>, Vector3<f64>, Matrix3<
 /// trajectory whatever the ground truth's up axis; their signs are arbitrary. Fewer than
 /// three points, or collinear ones, still give two orthonormal axes.
 pub fn principal_plane(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
-    let n = points.len().max(1) as f64;
-    let mean: Vector3<f64> = points.iter().sum::<Vector3<f64>>() / n;
-    let scatter: Matrix3<f64> = points
+    let finite: Vec<&Vector3<f64>> = points
         .iter()
-        .map(|p| (p - mean) * (p - mean).transpose())
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .collect();
+    let n = finite.len().max(1) as f64;
+    let mean: Vector3<f64> = finite.iter().copied().sum::<Vector3<f64>>() / n;
+    let scatter: Matrix3<f64> = finite
+        .iter()
+        .map(|p| (*p - mean) * (*p - mean).transpose())
         .sum();
+    // nalgebra's eigen solver does not return on NaN or infinite entries
+    if !scatter.iter().all(|v| v.is_finite()) {
+        return (Vector3::x(), Vector3::y());
+    }
     let eig = SymmetricEigen::new(scatter);
     let mut order = [0usize, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
