@@ -382,3 +382,126 @@ fn bad_input_names_the_file_and_what_is_wrong() {
     assert!(stderr(&o).contains("--tum"), "{}", stderr(&o));
     assert!(Path::new(&repo_file(GT)).is_file());
 }
+
+/// eval-batch computes APE, RPE and KITTI next to e_align: more columns in results.csv, the
+/// per-method medians in the summary; `plot box` and `plot cumulative` draw them.
+#[test]
+fn batch_computes_the_other_metrics_next_to_e_align() {
+    let dir = temp_dir("metrics_batch");
+    let synth = dir.join("synth");
+    let o = monovo(&[
+        "synth",
+        "results",
+        "-o",
+        synth.to_str().unwrap(),
+        "--sequences",
+        "2",
+        "--runs",
+        "2",
+        "--frames",
+        "400",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = dir.join("results.csv");
+    let o = monovo(&[
+        "eval-batch",
+        "--dataset",
+        synth.join("dataset").to_str().unwrap(),
+        "--results",
+        synth.join("results").to_str().unwrap(),
+        "-o",
+        csv.to_str().unwrap(),
+        "--ape",
+        "-as",
+        "--rpe=--tum --delta 0.5",
+        "--kitti",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let st = &v["methods"]["direct"]["statistics"];
+    assert!(
+        st["ape_rmse"]["median"].is_f64() && st["e_align"]["median"].is_f64(),
+        "{v}"
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header = text.lines().next().unwrap();
+    assert!(header.ends_with("poses,ape_rmse,ape_mean,ape_median,ape_std,ape_min,ape_max,rpe_rmse,rpe_mean,rpe_median,rpe_std,rpe_min,rpe_max,kitti_t_err,kitti_r_err,reason"), "{header}");
+    let rows = eval_metrics::parse_csv(&text).unwrap();
+    assert_eq!(rows.len(), 16);
+    for r in rows.iter().filter(|r| r.is_ok()) {
+        // Sim(3) over the start and end segments: APE's rmse is e_rmse
+        let ape = r.extra["ape_rmse"];
+        assert!(
+            (ape - r.metrics.e_rmse).abs() <= 1e-9 * ape,
+            "{ape} {}",
+            r.metrics.e_rmse
+        );
+        assert!(r.extra["rpe_rmse"].is_finite());
+        // the synthetic paths are shorter than KITTI's 100 m: no segment
+        assert!(r.extra["kitti_t_err"].is_infinite());
+    }
+    let png = dir.join("box.png");
+    let o = monovo(&[
+        "plot",
+        "box",
+        csv.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--metric",
+        "ape_rmse",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(v["boxes"]["feature"]["median"].is_f64(), "{v}");
+    let o = monovo(&[
+        "plot",
+        "cumulative",
+        csv.to_str().unwrap(),
+        "-o",
+        dir.join("c.png").to_str().unwrap(),
+        "--metric",
+        "rpe_mean",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // a results.csv without the column says how to get it
+    let plain = dir.join("plain.csv");
+    let o = monovo(&[
+        "eval-batch",
+        "--dataset",
+        synth.join("dataset").to_str().unwrap(),
+        "--results",
+        synth.join("results").to_str().unwrap(),
+        "-o",
+        plain.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let o = monovo(&[
+        "plot",
+        "box",
+        plain.to_str().unwrap(),
+        "-o",
+        dir.join("b2.png").to_str().unwrap(),
+        "--metric",
+        "ape_rmse",
+    ]);
+    assert!(stderr(&o).contains("eval-batch --ape"), "{}", stderr(&o));
+    // a bad flag of a metric names it
+    let o = monovo(&[
+        "eval-batch",
+        "--dataset",
+        synth.join("dataset").to_str().unwrap(),
+        "--results",
+        synth.join("results").to_str().unwrap(),
+        "-o",
+        dir.join("x.csv").to_str().unwrap(),
+        "--ape",
+        "-as --delta 3",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--ape"),
+        "{}",
+        stderr(&o)
+    );
+}

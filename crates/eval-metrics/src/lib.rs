@@ -41,7 +41,9 @@ mod association;
 mod batch;
 mod evaluate;
 mod evo_result;
+mod extra;
 mod kitti;
+mod metric;
 mod pose;
 mod pyrandom;
 mod rpe;
@@ -60,14 +62,16 @@ pub use association::{
     tum_associate, SyncMethod, SyncOptions,
 };
 pub use batch::{
-    cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
-    DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+    cumulative, evaluate_batch, evaluate_batch_with, failed_extra, parse_csv, summarize, write_csv,
+    Cumulative, Direction, DirectionFilter, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
 };
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
 pub use evo_result::{evo_result_entries, npy_bytes, EvoResultInfo, NamedArray};
+pub use extra::{batch_track, ExtraMetric, APE_COLUMNS, EXTRA_COLUMNS, KITTI_COLUMNS, RPE_COLUMNS};
 pub use kitti::{kitti_errors, KittiLengthError, KittiResult, KittiSegment, KITTI_LENGTHS};
+pub use metric::Metric;
 pub use pose::{
     evo_rotation_angle, parse_kitti_poses, quaternion_matrix, rotvec_angle, scipy_quaternion,
     PoseTrack, Se3,

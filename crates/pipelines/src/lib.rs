@@ -24,6 +24,7 @@
 #![deny(missing_docs)]
 
 mod batch;
+mod boxplot;
 pub mod calib;
 pub mod camera;
 pub mod demo;
@@ -33,6 +34,7 @@ pub mod experiment;
 pub mod exposure;
 mod inspect;
 mod metric_figures;
+mod metric_table;
 mod observe;
 pub mod paper;
 pub mod rectify;
@@ -40,8 +42,10 @@ pub mod synth;
 mod traj_metrics;
 
 pub use batch::{
-    evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount, StrayFile,
+    computed_metrics, evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount,
+    StrayFile,
 };
+pub use boxplot::{box_chart, method_box_figure, BoxStats};
 pub use camera::{summarize_camera, CameraSummary};
 pub use error::{error_chain, json_number, PipelineError, Result, WithContext};
 pub use eval::{
@@ -51,6 +55,7 @@ pub use eval::{
 pub use experiment::{run_experiment, Experiment, ExperimentReport, Layout};
 pub use inspect::{inspect_sequence, read_vignette, SequenceInfo};
 pub use metric_figures::{kitti_figure, metric_figure, PlotX};
+pub use metric_table::MetricTable;
 pub use monovo_figures as figures;
 pub use observe::{Observer, Silent};
 pub use paper::{cumulative_chart, method_medians, metric_study_figure, MethodMedians};

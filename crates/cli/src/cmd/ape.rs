@@ -2,7 +2,8 @@
 //! `evaluate_ate.py`) computes it.
 
 use anyhow::{bail, Result};
-use eval_metrics::{ApeOptions, TumAteOptions};
+use clap::Parser;
+use eval_metrics::{ApeOptions, ExtraMetric, TumAteOptions};
 use monovo_pipelines::{run_ape, run_tum_ate};
 
 use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArg, SyncArgs};
@@ -59,38 +60,59 @@ pub struct Args {
     pub out: OutputArgs,
 }
 
+/// The metric the arguments ask for: evo's APE, or evaluate_ate.py's with --tum.
+pub fn metric(args: &Args) -> Result<ExtraMetric> {
+    if !args.tum {
+        return Ok(ExtraMetric::Ape(ApeOptions {
+            relation: args.pose_relation.relation(),
+            align: args.align.options()?,
+            sync: args.sync.options(),
+        }));
+    }
+    let a = &args.align;
+    if a.correct_scale || a.align_origin || a.posyaw || a.n_to_align != -1 {
+        bail!("--tum aligns as evaluate_ate.py does (Horn's SE(3) over all pairs, no scale): -s, --align-origin, --posyaw and --n-to-align do not apply; use --scale for a fixed factor");
+    }
+    if !matches!(
+        args.pose_relation,
+        RelationArg::TransPart | RelationArg::PointDistance
+    ) {
+        bail!("--tum measures translations only (evaluate_ate.py); drop --pose-relation");
+    }
+    let s = &args.sync;
+    if s.sync_method != SyncArg::NearestTime || s.t_start.is_some() || s.t_end.is_some() {
+        bail!("--tum associates as associate.py does: --sync-method, --t-start and --t-end do not apply");
+    }
+    Ok(ExtraMetric::TumAte(TumAteOptions {
+        max_difference: s.t_max_diff.unwrap_or(0.02),
+        offset: s.t_offset,
+        scale: args.scale.unwrap_or(1.0),
+    }))
+}
+
+/// `monovo ape`'s options alone, for `eval-batch --ape FLAGS`.
+#[derive(clap::Parser, Debug)]
+#[command(name = "--ape", no_binary_name = true)]
+struct Flags {
+    #[command(flatten)]
+    args: Args,
+}
+
+/// The metric of `monovo ape`'s flags given as one string (`"-as -r angle_deg"`).
+pub fn metric_from_flags(flags: &str) -> Result<ExtraMetric> {
+    let words = ["REF", "EST"].into_iter().chain(flags.split_whitespace());
+    let f = Flags::try_parse_from(words).map_err(|e| anyhow::anyhow!("--ape \"{flags}\": {e}"))?;
+    metric(&f.args)
+}
+
 /// Runs `monovo ape`.
 pub fn run(args: &Args) -> Result<()> {
     let (format, reference, estimate) = args.inputs.resolve()?;
     args.out.check()?;
-    let report = if args.tum {
-        let a = &args.align;
-        if a.correct_scale || a.align_origin || a.posyaw || a.n_to_align != -1 {
-            bail!("--tum aligns as evaluate_ate.py does (Horn's SE(3) over all pairs, no scale): -s, --align-origin, --posyaw and --n-to-align do not apply; use --scale for a fixed factor");
-        }
-        if !matches!(
-            args.pose_relation,
-            RelationArg::TransPart | RelationArg::PointDistance
-        ) {
-            bail!("--tum measures translations only (evaluate_ate.py); drop --pose-relation");
-        }
-        let s = &args.sync;
-        if s.sync_method != SyncArg::NearestTime || s.t_start.is_some() || s.t_end.is_some() {
-            bail!("--tum associates as associate.py does: --sync-method, --t-start and --t-end do not apply");
-        }
-        let opts = TumAteOptions {
-            max_difference: s.t_max_diff.unwrap_or(0.02),
-            offset: s.t_offset,
-            scale: args.scale.unwrap_or(1.0),
-        };
-        run_tum_ate(reference, estimate, format, &opts)?
-    } else {
-        let opts = ApeOptions {
-            relation: args.pose_relation.relation(),
-            align: args.align.options()?,
-            sync: args.sync.options(),
-        };
-        run_ape(reference, estimate, format, &opts)?
+    let report = match metric(args)? {
+        ExtraMetric::TumAte(o) => run_tum_ate(reference, estimate, format, &o)?,
+        ExtraMetric::Ape(o) => run_ape(reference, estimate, format, &o)?,
+        _ => unreachable!("monovo ape asks for an APE"),
     };
     args.out.finish(&report)
 }

@@ -4,6 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use clap::Parser;
+use eval_metrics::ExtraMetric;
 use monovo_pipelines::{kitti_figure, kitti_pairs, run_kitti};
 
 use super::traj::AlignArgs;
@@ -47,6 +49,21 @@ pub struct Args {
     /// Replace an existing --plot file.
     #[arg(long)]
     pub force: bool,
+}
+
+/// `monovo kitti`'s alignment flags alone, for `eval-batch --kitti FLAGS`.
+#[derive(clap::Parser, Debug)]
+#[command(name = "--kitti", no_binary_name = true)]
+struct Flags {
+    #[command(flatten)]
+    align: AlignArgs,
+}
+
+/// The KITTI metric of alignment flags given as one string (`""`, `"-as"`).
+pub fn metric_from_flags(flags: &str) -> Result<ExtraMetric> {
+    let f = Flags::try_parse_from(flags.split_whitespace())
+        .map_err(|e| anyhow::anyhow!("--kitti \"{flags}\": {e}"))?;
+    Ok(ExtraMetric::Kitti(f.align.options()?))
 }
 
 /// Runs `monovo kitti`.

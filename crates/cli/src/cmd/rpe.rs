@@ -2,7 +2,8 @@
 //! `evaluate_rpe.py`) computes it.
 
 use anyhow::{bail, Result};
-use eval_metrics::{DeltaUnit, RpeOptions, TumDeltaUnit, TumRpeOptions};
+use clap::Parser;
+use eval_metrics::{DeltaUnit, ExtraMetric, RpeOptions, TumDeltaUnit, TumRpeOptions};
 use monovo_pipelines::{run_rpe, run_tum_rpe};
 
 use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArg, SyncArgs};
@@ -115,11 +116,9 @@ pub struct Args {
     pub out: OutputArgs,
 }
 
-/// Runs `monovo rpe`.
-pub fn run(args: &Args) -> Result<()> {
-    let (format, reference, estimate) = args.inputs.resolve()?;
-    args.out.check()?;
-    let report = if args.tum {
+/// The metric the arguments ask for: evo's RPE, or evaluate_rpe.py's with --tum.
+pub fn metric(args: &Args) -> Result<ExtraMetric> {
+    Ok(if args.tum {
         if args.align.any() {
             bail!("--tum compares motions as evaluate_rpe.py does, without alignment: -a, -s, --align-origin, --posyaw and --n-to-align do not apply; use --scale for a fixed factor");
         }
@@ -150,7 +149,7 @@ pub fn run(args: &Args) -> Result<()> {
             offset: s.t_offset,
             scale: args.scale.unwrap_or(1.0),
         };
-        run_tum_rpe(reference, estimate, format, &opts)?
+        ExtraMetric::TumRpe(opts)
     } else {
         let delta_unit = match args.delta_unit.unwrap_or(UnitArg::F) {
             UnitArg::F => DeltaUnit::Frames,
@@ -171,7 +170,33 @@ pub fn run(args: &Args) -> Result<()> {
             align: args.align.options()?,
             sync: args.sync.options(),
         };
-        run_rpe(reference, estimate, format, &opts)?
+        ExtraMetric::Rpe(opts)
+    })
+}
+
+/// `monovo rpe`'s options alone, for `eval-batch --rpe FLAGS`.
+#[derive(clap::Parser, Debug)]
+#[command(name = "--rpe", no_binary_name = true)]
+struct Flags {
+    #[command(flatten)]
+    args: Args,
+}
+
+/// The metric of `monovo rpe`'s flags given as one string (`"-as -d 10 -u m"`).
+pub fn metric_from_flags(flags: &str) -> Result<ExtraMetric> {
+    let words = ["REF", "EST"].into_iter().chain(flags.split_whitespace());
+    let f = Flags::try_parse_from(words).map_err(|e| anyhow::anyhow!("--rpe \"{flags}\": {e}"))?;
+    metric(&f.args)
+}
+
+/// Runs `monovo rpe`.
+pub fn run(args: &Args) -> Result<()> {
+    let (format, reference, estimate) = args.inputs.resolve()?;
+    args.out.check()?;
+    let report = match metric(args)? {
+        ExtraMetric::TumRpe(o) => run_tum_rpe(reference, estimate, format, &o)?,
+        ExtraMetric::Rpe(o) => run_rpe(reference, estimate, format, &o)?,
+        _ => unreachable!("monovo rpe asks for an RPE"),
     };
     args.out.finish(&report)
 }
