@@ -91,11 +91,22 @@ pub fn matching_time_indices(
         return (m1, m2);
     }
     let (first, last) = (s2[0], s2[s2.len() - 1]);
+    // sorted stamps_1 (the usual case) walk s2 once instead of a binary search each: the same
+    // insertion points
+    let walk = stamps_1.windows(2).all(|w| w[1] >= w[0]);
+    let mut cursor = 0;
     for (i, &t) in stamps_1.iter().enumerate() {
         if t < first - max_diff || t > last + max_diff {
             continue;
         }
-        let mut k = s2.partition_point(|&x| x <= t);
+        let mut k = if walk {
+            while cursor < s2.len() && s2[cursor] <= t {
+                cursor += 1;
+            }
+            cursor
+        } else {
+            s2.partition_point(|&x| x <= t)
+        };
         if k >= s2.len() {
             k = s2.len() - 1;
         }
