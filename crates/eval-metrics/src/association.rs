@@ -192,7 +192,10 @@ pub fn evo_pairs(
         return Ok((reference.clone(), estimate.clone()));
     }
     let nonzero = |v: Option<f64>| v.is_some_and(|x| x != 0.0);
-    let reference = if nonzero(opts.t_start) || nonzero(opts.t_end) {
+    if !(nonzero(opts.t_start) || nonzero(opts.t_end)) {
+        return evo_sync(reference, estimate, opts);
+    }
+    let reference = {
         let times = reference.times.as_deref().unwrap_or_default();
         let lo = opts.t_start.unwrap_or(times[0]);
         let hi = opts.t_end.unwrap_or(times[times.len() - 1]);
@@ -208,8 +211,6 @@ pub fn evo_pairs(
             return Err(MetricError::Empty("reference within --t_start..--t_end"));
         }
         reference.select(&ids)
-    } else {
-        reference.clone()
     };
     evo_sync(&reference, estimate, opts)
 }

@@ -178,9 +178,12 @@ fn sequence_errors(gt: &PoseTrack, est: &PoseTrack) -> Result<Vec<KittiSegment>,
     for first in (0..gt.len()).step_by(10) {
         for &len in &KITTI_LENGTHS {
             let target = dist[first] + len;
-            let Some(last) = (first..dist.len()).find(|&i| dist[i] > target) else {
+            // the first frame past the length (the distances never decrease: a binary search
+            // finds the frame the devkit's linear scan finds)
+            let last = first + dist[first..].partition_point(|&d| d <= target);
+            if last >= dist.len() {
                 continue;
-            };
+            }
             let g0 = Mat4::pose(gt, first)
                 .inv()
                 .ok_or_else(|| singular("reference", first))?;
