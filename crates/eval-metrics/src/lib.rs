@@ -8,6 +8,11 @@
 //!   segment RMSEs. A run that cannot be evaluated is a *failed* result, not an error.
 //! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`summary_table`], and the
 //!   results.csv format ([`write_csv`], [`parse_csv`]) for the paper's tables and plots.
+//! * The field's other trajectory metrics, each exactly as its reference computes it, on
+//!   [`PoseTrack`]s: evo's [`ape`] and [`rpe`] (association [`evo_pairs`], alignment
+//!   [`align_track`] including 4-DoF), the TUM RGB-D scripts' [`tum_ate`] and [`tum_rpe`], the
+//!   KITTI devkit's [`kitti_errors`], with evo's [`ErrorStats`] and result files
+//!   ([`evo_result_entries`]); [`ExtraMetric`] computes them per run of a batch.
 //!
 //! Geometry is [`nalgebra`]'s: positions are `Vector3<f64>`, [`Sim3`] converts to and from
 //! `Similarity3<f64>`, and [`Pose::world_from_camera`] gives an `Isometry3<f64>`. Every

@@ -5,4 +5,5 @@ mod align;
 mod batch;
 mod common;
 mod metrics;
+mod other_metrics;
 mod parse;
