@@ -62,11 +62,10 @@ def rpe(case):
         float(p.get("scale", 1.0)))
     trans = numpy.array(result)[:, 4]
     rot = numpy.array(result)[:, 5]
-    r = stats(rot, 180.0 / numpy.pi)
-    # the script's own conversion: value * 180.0 / numpy.pi
-    for k in ("rmse", "mean", "std", "min", "max"):
-        r[k] = float(stats(rot)[k] * 180.0 / numpy.pi)
-    r["median"] = float(numpy.median(rot) * 180.0 / numpy.pi)
+    # each statistic in degrees as the script converts it: value * 180.0 / numpy.pi
+    r = stats(rot)
+    for k in ("rmse", "mean", "median", "std", "min", "max"):
+        r[k] = r[k] * 180.0 / numpy.pi
     r["median_as_printed_rad"] = float(numpy.median(rot))
     return {"translational": stats(trans), "rotational_deg": r}
 
