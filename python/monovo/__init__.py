@@ -5,6 +5,9 @@ The same crates as the ``monovo`` command, so the same exact numbers:
 * :func:`evaluate`, :func:`evaluate_many`: the paper's loop-closure metrics (``e_align``,
   ``e_s``, ``e_r``, ...) of trajectory files or N x 8 arrays ``t x y z qx qy qz qw`` (also
   evo's ``PoseTrajectory3D``), as ``monovo eval --json`` computes them;
+* :func:`ape`, :func:`rpe`, :func:`kitti`: the field's other metrics (APE and RPE as evo or
+  the TUM RGB-D scripts compute them, the KITTI devkit's segment errors), as ``monovo ape``,
+  ``monovo rpe`` and ``monovo kitti`` compute them, with their options under evo's names;
 * :class:`Sequence`: a sequence folder of any layout monovo reads (monoVO/DSO, TUM-VI,
   EuRoC/ASL, 4Seasons, KITTI, TUM RGB-D) as numpy frames, raw, rectified to a pinhole, or
   photometrically corrected to float32 irradiance;
@@ -40,10 +43,24 @@ from ._monovo import (
     __version__,
     read_trajectory,
 )
+from ._metrics import (
+    Alignment,
+    ErrorStats,
+    KittiLength,
+    KittiResult,
+    MetricResult,
+    ape,
+    kitti,
+    rpe,
+)
+from ._results import _Result
+from ._trajectory import PathLike, TrajectoryLike, _trajectory_arg, from_evo, to_evo
 
 __all__ = [
+    "Alignment",
     "Camera",
     "Error",
+    "ErrorStats",
     "Evaluation",
     "FileError",
     "FormatError",
@@ -51,66 +68,27 @@ __all__ = [
     "FrameIterator",
     "InverseResponse",
     "JPEG_DECODER",
+    "KittiLength",
+    "KittiResult",
+    "MetricResult",
     "Rectifier",
     "ResponseCalibration",
     "Sequence",
     "VignetteCalibration",
     "Vignette",
+    "ape",
     "calibrate_response",
     "calibrate_vignette",
     "evaluate",
     "evaluate_many",
     "from_evo",
+    "kitti",
     "read_trajectory",
     "response_options",
+    "rpe",
     "to_evo",
     "vignette_options",
 ]
-
-PathLike = Union[str, "_os.PathLike[str]"]
-TrajectoryLike = Union[PathLike, _np.ndarray, Any]
-
-
-def _is_evo(x: Any) -> bool:
-    return hasattr(x, "orientations_quat_wxyz") and hasattr(x, "timestamps")
-
-
-def from_evo(trajectory: Any) -> _np.ndarray:
-    """An evo ``PoseTrajectory3D`` as an N x 8 array ``t x y z qx qy qz qw``.
-
-    evo stores quaternions w first (``orientations_quat_wxyz``); monovo, like the TUM format,
-    w last.
-    """
-    q = _np.asarray(trajectory.orientations_quat_wxyz, dtype=_np.float64)
-    return _np.column_stack(
-        [
-            _np.asarray(trajectory.timestamps, dtype=_np.float64),
-            _np.asarray(trajectory.positions_xyz, dtype=_np.float64),
-            q[:, [1, 2, 3, 0]],
-        ]
-    )
-
-
-def to_evo(trajectory: TrajectoryLike) -> Any:
-    """An N x 8 array ``t x y z qx qy qz qw`` (or a trajectory file, read as
-    :func:`read_trajectory` reads it) as an evo ``PoseTrajectory3D`` (needs evo)."""
-    from evo.core.trajectory import PoseTrajectory3D  # type: ignore[import-untyped, unused-ignore]
-
-    if isinstance(trajectory, (str, _os.PathLike)):
-        trajectory = read_trajectory(trajectory)
-    a = _np.asarray(trajectory, dtype=_np.float64)
-    if a.ndim != 2 or a.shape[1] != 8:
-        raise FormatError(f"expected an N x 8 array `t x y z qx qy qz qw`, got shape {a.shape}")
-    return PoseTrajectory3D(
-        positions_xyz=a[:, 1:4].copy(),
-        orientations_quat_wxyz=a[:, [7, 4, 5, 6]].copy(),
-        timestamps=a[:, 0].copy(),
-    )
-
-
-def _trajectory_arg(x: Any) -> Any:
-    return from_evo(x) if _is_evo(x) else x
-
 
 def evaluate(
     estimate: TrajectoryLike,
@@ -152,50 +130,6 @@ def evaluate_many(
     its message prefixed with ``pairs[i]``."""
     prepared = [(_trajectory_arg(e), _trajectory_arg(g)) for e, g in pairs]
     return _monovo.evaluate_many(prepared, threads, format, cam)
-
-
-class _Result:
-    """A calibration result: the library's serialised result with attribute access; lists of
-    numbers are numpy arrays, images (``width``, ``height``, ``data``) H x W arrays."""
-
-    def __init__(self, data: dict):
-        self._data = data
-        for k, v in data.items():
-            setattr(self, k, _convert(v))
-
-    def __getattr__(self, name: str) -> Any:  # the fields, set in __init__
-        raise AttributeError(f"{type(self).__name__} has no field `{name}` (keys() lists them)")
-
-    def to_dict(self) -> dict:
-        """The result as the library serialises it (JSON types; ``None`` for non-finite)."""
-        return self._data
-
-    def keys(self) -> "list[str]":
-        """The result's fields."""
-        return list(self._data)
-
-    def __repr__(self) -> str:
-        fields = ", ".join(
-            f"{k}={v!r}" for k, v in self._data.items() if isinstance(v, (bool, int, float, str))
-        )
-        return f"{type(self).__name__}({fields})"
-
-
-def _convert(v: Any) -> Any:
-    if isinstance(v, list) and v and all(isinstance(x, (int, float)) or x is None for x in v):
-        if all(isinstance(x, int) and not isinstance(x, bool) for x in v):
-            return _np.asarray(v)
-        return _np.asarray([_np.nan if x is None else x for x in v], dtype=_np.float64)
-    if isinstance(v, dict):
-        if set(v) == {"width", "height", "data"}:
-            a = _np.asarray([_np.nan if x is None else x for x in v["data"]])
-            if a.dtype == _np.float64:
-                a = a.astype(_np.float32)
-            return a.reshape(v["height"], v["width"])
-        if set(v) == {"table"}:
-            return InverseResponse(v["table"])
-        return _Result(v)
-    return v
 
 
 class ResponseCalibration(_Result):

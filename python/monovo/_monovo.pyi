@@ -19,6 +19,9 @@ __all__ = [
     "evaluate",
     "evaluate_many",
     "read_trajectory",
+    "_ape",
+    "_rpe",
+    "_kitti",
     "Sequence",
     "Frame",
     "FrameIterator",
@@ -92,6 +95,16 @@ def evaluate_many(
 def read_trajectory(
     path: _Path, format: Optional[str] = None, times: Optional[_Path] = None
 ) -> npt.NDArray[np.float64]: ...
+
+# monovo.ape, monovo.rpe, monovo.kitti (python/monovo/_metrics.py) document these: the
+# options are evo's names; the command's JSON text, and evo's result arrays
+def _ape(
+    reference: Any, estimate: Any, format: Optional[str] = None, **options: Any
+) -> Tuple[str, Dict[str, npt.NDArray[np.float64]]]: ...
+def _rpe(
+    reference: Any, estimate: Any, format: Optional[str] = None, **options: Any
+) -> Tuple[str, Dict[str, npt.NDArray[np.float64]]]: ...
+def _kitti(groundtruth: Any, estimate: Any, **options: Any) -> str: ...
 
 @final
 class Camera:

@@ -206,25 +206,35 @@ pub fn parse_kitti_poses(text: &str) -> Result<PoseTrack, EvalError> {
             "12 numbers `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz`",
             false,
         )?;
+        out.push_kitti_row(&v)
+            .map_err(|what| EvalError::NotARotation {
+                line: no,
+                what,
+                found: excerpt(line),
+            })?;
+    }
+    Ok(out)
+}
+
+impl PoseTrack {
+    /// Appends a KITTI pose row `r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz` (unstamped),
+    /// the matrix as written. `Err` says what is wrong: a singular rotation matrix.
+    pub fn push_kitti_row(&mut self, v: &[f64; 12]) -> Result<(), &'static str> {
         let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
         let det = r.determinant();
         if det.is_finite() && det.abs() < 1e-6 {
-            return Err(EvalError::NotARotation {
-                line: no,
-                what: "the rotation matrix is singular",
-                found: excerpt(line),
-            });
+            return Err("the rotation matrix is singular");
         }
         let q = if r.iter().all(|x| x.is_finite()) {
             UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)).into_inner()
         } else {
             Quaternion::new(f64::NAN, f64::NAN, f64::NAN, f64::NAN)
         };
-        out.positions.push(Vector3::new(v[3], v[7], v[11]));
-        out.rotations.push(r);
-        out.quaternions.push(q);
+        self.positions.push(Vector3::new(v[3], v[7], v[11]));
+        self.rotations.push(r);
+        self.quaternions.push(q);
+        Ok(())
     }
-    Ok(out)
 }
 
 /// The quaternion `(x, y, z, w)` of a rotation matrix as scipy's `Rotation.from_matrix`

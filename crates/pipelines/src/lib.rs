@@ -33,6 +33,7 @@ mod eval;
 pub mod experiment;
 pub mod exposure;
 mod inspect;
+mod metric_args;
 mod metric_figures;
 mod metric_table;
 mod observe;
@@ -54,14 +55,15 @@ pub use eval::{
 };
 pub use experiment::{run_experiment, Experiment, ExperimentReport, Layout};
 pub use inspect::{inspect_sequence, read_vignette, SequenceInfo};
+pub use metric_args::{MetricArgs, RpeUnit, Spelling};
 pub use metric_figures::{kitti_figure, metric_figure, PlotX};
 pub use metric_table::MetricTable;
 pub use monovo_figures as figures;
 pub use observe::{Observer, Silent};
 pub use paper::{cumulative_chart, method_medians, metric_study_figure, MethodMedians};
 pub use traj_metrics::{
-    kitti_pairs, load_track, run_ape, run_kitti, run_rpe, run_tum_ate, run_tum_rpe,
-    save_evo_result, AlignmentReport, KittiReport, MetricReport, PlotData,
+    kitti_pairs, kitti_report, load_track, metric_report, run_kitti, run_metric, save_evo_result,
+    AlignmentReport, KittiReport, MetricReport, PlotData,
 };
 
 /// The README's Rust examples, compiled as doctests of this crate (which depends on every

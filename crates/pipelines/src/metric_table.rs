@@ -15,11 +15,10 @@
 //! align = "sim3"
 //! ```
 
-use eval_metrics::{
-    AlignMode, AlignOptions, ApeOptions, DeltaUnit, ExtraMetric, PoseRelation, RpeOptions,
-    SyncMethod, SyncOptions, TumAteOptions, TumDeltaUnit, TumRpeOptions,
-};
+use eval_metrics::{ExtraMetric, PoseRelation, SyncMethod};
 use serde::Deserialize;
+
+use crate::metric_args::{MetricArgs, Spelling};
 
 /// One metric table of a manifest.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -58,105 +57,53 @@ pub struct MetricTable {
     pub scale: Option<f64>,
 }
 
-fn align_options(t: &MetricTable) -> Result<AlignOptions, String> {
-    let (mode, origin) = match t.align.as_deref().unwrap_or("none") {
-        "none" => (AlignMode::None, false),
-        "se3" => (AlignMode::Se3, false),
-        "sim3" => (AlignMode::Sim3, false),
-        "scale" => (AlignMode::Scale, false),
-        "posyaw" => (AlignMode::PosYaw, false),
-        "origin" => (AlignMode::None, true),
-        other => {
-            return Err(format!(
-                "align = \"{other}\": expected none, se3, sim3, scale, posyaw or origin"
-            ))
-        }
-    };
-    Ok(AlignOptions {
-        mode,
-        n_to_align: t.n_to_align,
-        origin,
-    })
-}
-
-fn sync_options(t: &MetricTable) -> SyncOptions {
-    let d = SyncOptions::default();
-    SyncOptions {
-        max_diff: t.t_max_diff.unwrap_or(d.max_diff),
-        offset: t.t_offset.unwrap_or(0.0),
-        method: t.sync_method.unwrap_or_default(),
-        t_start: None,
-        t_end: None,
-    }
-}
-
 impl MetricTable {
+    /// The table as the options of `monovo ape/rpe/kitti` (`align = "sim3"` is `-as`).
+    pub fn args(&self) -> Result<MetricArgs, String> {
+        let mut a = MetricArgs::default();
+        match self.align.as_deref().unwrap_or("none") {
+            "none" => {}
+            "se3" => a.align = true,
+            "sim3" => (a.align, a.correct_scale) = (true, true),
+            "scale" => a.correct_scale = true,
+            "posyaw" => a.posyaw = true,
+            "origin" => a.align_origin = true,
+            other => {
+                return Err(format!(
+                    "align = \"{other}\": expected none, se3, sim3, scale, posyaw or origin"
+                ))
+            }
+        }
+        if let Some(n) = self.n_to_align {
+            a.n_to_align = i64::try_from(n).unwrap_or(i64::MAX);
+        }
+        a.tum = self.tum;
+        a.pose_relation = self.pose_relation.unwrap_or_default();
+        a.t_max_diff = self.t_max_diff;
+        a.t_offset = self.t_offset.unwrap_or(0.0);
+        a.sync_method = self.sync_method.unwrap_or_default();
+        a.delta = self.delta.unwrap_or(a.delta);
+        a.delta_unit = self.delta_unit.as_deref().map(str::parse).transpose()?;
+        a.delta_tol = self.delta_tol.unwrap_or(a.delta_tol);
+        a.all_pairs = self.all_pairs;
+        a.pairs_from_reference = self.pairs_from_reference;
+        a.max_pairs = self.max_pairs;
+        a.scale = self.scale;
+        Ok(a)
+    }
+
     /// The `[ape]` table's metric.
     pub fn ape(&self) -> Result<ExtraMetric, String> {
-        if self.tum {
-            return Ok(ExtraMetric::TumAte(TumAteOptions {
-                max_difference: self.t_max_diff.unwrap_or(0.02),
-                offset: self.t_offset.unwrap_or(0.0),
-                scale: self.scale.unwrap_or(1.0),
-            }));
-        }
-        Ok(ExtraMetric::Ape(ApeOptions {
-            relation: self.pose_relation.unwrap_or_default(),
-            align: align_options(self)?,
-            sync: sync_options(self),
-        }))
+        self.args()?.ape(Spelling::Names)
     }
 
     /// The `[rpe]` table's metric.
     pub fn rpe(&self) -> Result<ExtraMetric, String> {
-        let unit = self.delta_unit.as_deref();
-        if self.tum {
-            let delta_unit = match unit.unwrap_or("s") {
-                "s" => TumDeltaUnit::Seconds,
-                "m" => TumDeltaUnit::Meters,
-                "r" | "rad" => TumDeltaUnit::Radians,
-                "d" | "deg" => TumDeltaUnit::Degrees,
-                "f" => TumDeltaUnit::Frames,
-                u => {
-                    return Err(format!(
-                        "delta_unit = \"{u}\": expected s, m, rad, deg or f"
-                    ))
-                }
-            };
-            return Ok(ExtraMetric::TumRpe(TumRpeOptions {
-                fixed_delta: !self.all_pairs,
-                delta: self.delta.unwrap_or(1.0),
-                delta_unit,
-                max_pairs: self.max_pairs.unwrap_or(10_000),
-                offset: self.t_offset.unwrap_or(0.0),
-                scale: self.scale.unwrap_or(1.0),
-            }));
-        }
-        let delta_unit = match unit.unwrap_or("f") {
-            "f" => DeltaUnit::Frames,
-            "m" => DeltaUnit::Meters,
-            "d" | "deg" => DeltaUnit::Degrees,
-            "r" | "rad" => DeltaUnit::Radians,
-            u => {
-                return Err(format!(
-                    "delta_unit = \"{u}\": expected f, m, d or r (s needs tum = true)"
-                ))
-            }
-        };
-        Ok(ExtraMetric::Rpe(RpeOptions {
-            relation: self.pose_relation.unwrap_or_default(),
-            delta: self.delta.unwrap_or(1.0),
-            delta_unit,
-            delta_tol: self.delta_tol.unwrap_or(0.1),
-            all_pairs: self.all_pairs,
-            pairs_from_reference: self.pairs_from_reference,
-            align: align_options(self)?,
-            sync: sync_options(self),
-        }))
+        self.args()?.rpe(Spelling::Names)
     }
 
     /// The `[kitti]` table's metric.
     pub fn kitti(&self) -> Result<ExtraMetric, String> {
-        Ok(ExtraMetric::Kitti(align_options(self)?))
+        self.args()?.kitti(Spelling::Names)
     }
 }

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use eval_metrics::{
     ape, detect_format, evo_result_entries, kitti_errors, parse_euroc, parse_kitti_poses,
     parse_tum, rpe, tum_ate, tum_rpe, AlignMode, AlignOptions, AlignTransform, ApeOptions,
-    ErrorStats, EvoResultInfo, KittiLengthError, KittiResult, MetricError, NamedArray, PoseTrack,
-    RpeOptions, TrajectoryFormat, TumAteOptions, TumRpeOptions,
+    ErrorStats, EvoResultInfo, ExtraMetric, KittiLengthError, KittiResult, MetricError, NamedArray,
+    PoseTrack, RpeOptions, TrajectoryFormat, TumAteOptions, TumRpeOptions,
 };
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -36,13 +36,9 @@ pub fn load_track(path: &Path, format: Option<TrajectoryFormat>) -> Result<PoseT
     })
 }
 
-/// The error of a metric, naming the files.
-fn metric_err(what: &str, reference: &Path, estimate: &Path, e: MetricError) -> PipelineError {
-    PipelineError::Invalid(format!(
-        "{what} of {} against {}: {e}",
-        estimate.display(),
-        reference.display()
-    ))
+/// The error of a metric, naming the trajectories (`[reference, estimate]`).
+fn metric_err(what: &str, names: [&str; 2], e: MetricError) -> PipelineError {
+    PipelineError::Invalid(format!("{what} of {} against {}: {e}", names[1], names[0]))
 }
 
 /// The alignment applied, as reported.
@@ -161,18 +157,50 @@ fn seconds_of(t: &PoseTrack) -> Vec<f64> {
         .unwrap_or_default()
 }
 
-/// APE as `evo_ape` computes it.
-pub fn run_ape(
+/// APE or RPE (evo's, or the TUM RGB-D scripts') of two trajectory files, as `monovo ape` and
+/// `monovo rpe` report it. `format` `None` recognises each file by its first line.
+pub fn run_metric(
     reference: &Path,
     estimate: &Path,
     format: Option<TrajectoryFormat>,
-    opts: &ApeOptions,
+    metric: &ExtraMetric,
 ) -> Result<MetricReport> {
     let (r, e) = (
         load_track(reference, format)?,
         load_track(estimate, format)?,
     );
-    let res = ape(&r, &e, opts).map_err(|err| metric_err("APE", reference, estimate, err))?;
+    let names = [reference, estimate].map(|p| p.display().to_string());
+    metric_report(&r, &e, [&names[0], &names[1]], metric)
+}
+
+/// APE or RPE (evo's, or the TUM RGB-D scripts') of two trajectories, as `monovo ape` and
+/// `monovo rpe` report it; `names` (`[reference, estimate]`, their paths) name them in the
+/// report and in errors. The KITTI segment errors are [`kitti_report`]'s.
+pub fn metric_report(
+    reference: &PoseTrack,
+    estimate: &PoseTrack,
+    names: [&str; 2],
+    metric: &ExtraMetric,
+) -> Result<MetricReport> {
+    match metric {
+        ExtraMetric::Ape(o) => ape_report(reference, estimate, names, o),
+        ExtraMetric::Rpe(o) => rpe_report(reference, estimate, names, o),
+        ExtraMetric::TumAte(o) => tum_ate_report(reference, estimate, names, o),
+        ExtraMetric::TumRpe(o) => tum_rpe_report(reference, estimate, names, o),
+        ExtraMetric::Kitti(_) => Err(PipelineError::Invalid(
+            "the KITTI segment errors have a report of their own (kitti_report)".into(),
+        )),
+    }
+}
+
+/// APE as `evo_ape` computes it.
+fn ape_report(
+    r: &PoseTrack,
+    e: &PoseTrack,
+    names: [&str; 2],
+    opts: &ApeOptions,
+) -> Result<MetricReport> {
+    let res = ape(r, e, opts).map_err(|err| metric_err("APE", names, err))?;
     let seconds = seconds_of(&res.estimate);
     let distances = res.reference.distances();
     let mut arrays = vec![arr("error_array", res.errors.clone())];
@@ -197,8 +225,8 @@ pub fn run_ape(
             .alignment
             .as_ref()
             .map(|a| AlignmentReport::new(mode_name(&opts.align), a)),
-        reference: reference.display().to_string(),
-        estimate: estimate.display().to_string(),
+        reference: names[0].to_string(),
+        estimate: names[1].to_string(),
         plot: PlotData {
             errors: res.errors,
             seconds,
@@ -211,17 +239,13 @@ pub fn run_ape(
 }
 
 /// RPE as `evo_rpe` computes it.
-pub fn run_rpe(
-    reference: &Path,
-    estimate: &Path,
-    format: Option<TrajectoryFormat>,
+fn rpe_report(
+    r: &PoseTrack,
+    e: &PoseTrack,
+    names: [&str; 2],
     opts: &RpeOptions,
 ) -> Result<MetricReport> {
-    let (r, e) = (
-        load_track(reference, format)?,
-        load_track(estimate, format)?,
-    );
-    let res = rpe(&r, &e, opts).map_err(|err| metric_err("RPE", reference, estimate, err))?;
+    let res = rpe(r, e, opts).map_err(|err| metric_err("RPE", names, err))?;
     // evo keeps the first pose and the second pose of each pair for its arrays
     let mut ids = vec![0usize];
     ids.extend(res.pairs.iter().map(|p| p.1));
@@ -251,8 +275,8 @@ pub fn run_rpe(
             .alignment
             .as_ref()
             .map(|a| AlignmentReport::new(mode_name(&opts.align), a)),
-        reference: reference.display().to_string(),
-        estimate: estimate.display().to_string(),
+        reference: names[0].to_string(),
+        estimate: names[1].to_string(),
         plot: PlotData {
             errors: res.errors,
             seconds,
@@ -265,18 +289,13 @@ pub fn run_rpe(
 }
 
 /// The absolute trajectory error as the TUM RGB-D `evaluate_ate.py` computes it.
-pub fn run_tum_ate(
-    reference: &Path,
-    estimate: &Path,
-    format: Option<TrajectoryFormat>,
+fn tum_ate_report(
+    r: &PoseTrack,
+    e: &PoseTrack,
+    names: [&str; 2],
     opts: &TumAteOptions,
 ) -> Result<MetricReport> {
-    let (r, e) = (
-        load_track(reference, format)?,
-        load_track(estimate, format)?,
-    );
-    let res = tum_ate(&r, &e, opts)
-        .map_err(|err| metric_err("ATE (TUM RGB-D)", reference, estimate, err))?;
+    let res = tum_ate(r, e, opts).map_err(|err| metric_err("ATE (TUM RGB-D)", names, err))?;
     let t0 = res.stamps.first().copied().unwrap_or(0.0);
     let seconds: Vec<f64> = res.stamps.iter().map(|t| t - t0).collect();
     let mut distances = vec![0.0];
@@ -313,8 +332,8 @@ pub fn run_tum_ate(
             .alignment
             .as_ref()
             .map(|a| AlignmentReport::new("horn", a)),
-        reference: reference.display().to_string(),
-        estimate: estimate.display().to_string(),
+        reference: names[0].to_string(),
+        estimate: names[1].to_string(),
         plot: PlotData {
             errors: res.translational_errors,
             seconds,
@@ -327,18 +346,13 @@ pub fn run_tum_ate(
 }
 
 /// The relative pose error as the TUM RGB-D `evaluate_rpe.py` computes it.
-pub fn run_tum_rpe(
-    reference: &Path,
-    estimate: &Path,
-    format: Option<TrajectoryFormat>,
+fn tum_rpe_report(
+    r: &PoseTrack,
+    e: &PoseTrack,
+    names: [&str; 2],
     opts: &TumRpeOptions,
 ) -> Result<MetricReport> {
-    let (r, e) = (
-        load_track(reference, format)?,
-        load_track(estimate, format)?,
-    );
-    let res = tum_rpe(&r, &e, opts)
-        .map_err(|err| metric_err("RPE (TUM RGB-D)", reference, estimate, err))?;
+    let res = tum_rpe(r, e, opts).map_err(|err| metric_err("RPE (TUM RGB-D)", names, err))?;
     let t0 = res.stamps.iter().copied().fold(f64::INFINITY, f64::min);
     let seconds: Vec<f64> = res.stamps.iter().map(|t| t - t0).collect();
     let arrays = vec![
@@ -371,14 +385,14 @@ pub fn run_tum_rpe(
         rotational_error: res.rotational_deg,
         compared_pose_pairs: res.translational.n,
         alignment: None,
-        reference: reference.display().to_string(),
-        estimate: estimate.display().to_string(),
+        reference: names[0].to_string(),
+        estimate: names[1].to_string(),
         plot: PlotData {
             errors: res.translational_errors,
             seconds,
             distances: Vec::new(),
-            reference: r.positions,
-            estimate: e.positions,
+            reference: r.positions.clone(),
+            estimate: e.positions.clone(),
         },
         arrays,
     })
@@ -485,7 +499,7 @@ pub fn kitti_pairs(gt: &Path, est: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
     Ok(names.iter().map(|n| (gt.join(n), est.join(n))).collect())
 }
 
-/// The KITTI devkit's segment errors of one or more sequences (pooled), the estimate
+/// The KITTI devkit's segment errors of one or more sequences of files (pooled), the estimate
 /// optionally aligned first (by pose line).
 pub fn run_kitti(
     pairs: &[(PathBuf, PathBuf)],
@@ -494,13 +508,26 @@ pub fn run_kitti(
 ) -> Result<KittiReport> {
     let mut seqs = Vec::with_capacity(pairs.len());
     for (g, e) in pairs {
-        let gt = load_track(g, format)?;
-        let mut est = load_track(e, format)?;
+        let names = [g, e].map(|p| p.display().to_string());
+        seqs.push((load_track(g, format)?, load_track(e, format)?, names));
+    }
+    kitti_report(seqs, align)
+}
+
+/// The KITTI devkit's segment errors of one or more sequences `(ground truth, estimate,
+/// [their names])` (pooled), the estimate optionally aligned first (by pose line).
+pub fn kitti_report(
+    sequences: Vec<(PoseTrack, PoseTrack, [String; 2])>,
+    align: &AlignOptions,
+) -> Result<KittiReport> {
+    let mut seqs = Vec::with_capacity(sequences.len());
+    let mut names = Vec::with_capacity(sequences.len());
+    for (gt, mut est, n) in sequences {
+        let nm = [n[0].as_str(), n[1].as_str()];
         if gt.len() != est.len() {
             return Err(metric_err(
                 "KITTI segment errors",
-                g,
-                e,
+                nm,
                 MetricError::LengthMismatch {
                     reference: gt.len(),
                     estimate: est.len(),
@@ -508,12 +535,15 @@ pub fn run_kitti(
             ));
         }
         eval_metrics::align_track(&mut est, &gt, align)
-            .map_err(|err| metric_err("KITTI alignment", g, e, err))?;
+            .map_err(|err| metric_err("KITTI alignment", nm, err))?;
         seqs.push((gt, est));
+        names.push(n);
     }
     let res: KittiResult = kitti_errors(&seqs).map_err(|err| {
-        let (g, e) = &pairs[0];
-        metric_err("KITTI segment errors", g, e, err)
+        let n = names
+            .first()
+            .map_or(["", ""], |n| [n[0].as_str(), n[1].as_str()]);
+        metric_err("KITTI segment errors", n, err)
     })?;
     Ok(KittiReport {
         t_err_percent: res.t_err_percent,
@@ -522,10 +552,7 @@ pub fn run_kitti(
         r_err_rad_per_m: f64::from(res.r_err),
         segments: res.segments.len(),
         lengths: res.lengths,
-        sequences: pairs
-            .iter()
-            .map(|(g, e)| [g.display().to_string(), e.display().to_string()])
-            .collect(),
+        sequences: names,
         alignment: mode_name(align).to_string(),
         paths: seqs
             .into_iter()

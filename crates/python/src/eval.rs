@@ -22,11 +22,26 @@ pub enum Input {
     Rows(Vec<[f64; 8]>),
 }
 
-/// A path (`str` or `os.PathLike`) or an N x 8 array of numbers (any dtype numpy can make
-/// float64 of).
-pub fn extract_input(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Input> {
+/// A path, or a 2-D array of numbers as float64 rows.
+pub enum Arg {
+    /// A file or folder.
+    Path(PathBuf),
+    /// `rows` x `cols` numbers, row by row.
+    Matrix {
+        /// Number of rows.
+        rows: usize,
+        /// Number of columns.
+        cols: usize,
+        /// The numbers, row-major.
+        data: Vec<f64>,
+    },
+}
+
+/// A path (`str` or `os.PathLike`) or a 2-D array of numbers (any dtype numpy can make
+/// float64 of, lists too); `expected` describes the array in errors.
+pub fn extract_arg(obj: &Bound<'_, PyAny>, what: &str, expected: &str) -> PyResult<Arg> {
     if let Ok(p) = obj.extract::<PathBuf>() {
-        return Ok(Input::Path(p));
+        return Ok(Arg::Path(p));
     }
     let array = match obj.extract::<PyReadonlyArray2<'_, f64>>() {
         Ok(a) => a,
@@ -36,13 +51,13 @@ pub fn extract_input(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Input> {
                 .call_method1("asarray", (obj, np.getattr("float64")?))
                 .map_err(|e| {
                     Error::format(format!(
-                        "{what}: expected a path or an N x 8 array `t x y z qx qy qz qw`, got {} ({e})",
+                        "{what}: expected a path or {expected}, got {} ({e})",
                         obj.get_type().name().map_or("?".into(), |n| n.to_string())
                     ))
                 })?;
             if a.getattr("ndim")?.extract::<usize>()? != 2 {
                 return Err(Error::format(format!(
-                    "{what}: expected an N x 8 array `t x y z qx qy qz qw`, got shape {}",
+                    "{what}: expected {expected}, got shape {}",
                     a.getattr("shape")?.str()?
                 ))
                 .into());
@@ -51,20 +66,33 @@ pub fn extract_input(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Input> {
         }
     };
     let shape = array.shape();
-    if shape[1] != 8 {
-        return Err(Error::format(format!(
-            "{what}: expected an N x 8 array `t x y z qx qy qz qw`, got shape ({}, {})",
-            shape[0], shape[1]
+    Ok(Arg::Matrix {
+        rows: shape[0],
+        cols: shape[1],
+        data: array.as_array().iter().copied().collect(),
+    })
+}
+
+/// An N x 8 array's description in errors.
+const ROWS_8: &str = "an N x 8 array `t x y z qx qy qz qw`";
+
+/// A path or an N x 8 array of numbers (any dtype numpy can make float64 of).
+pub fn extract_input(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Input> {
+    match extract_arg(obj, what, ROWS_8)? {
+        Arg::Path(p) => Ok(Input::Path(p)),
+        Arg::Matrix { cols: 8, data, .. } => Ok(Input::Rows(rows_of(&data))),
+        Arg::Matrix { rows, cols, .. } => Err(Error::format(format!(
+            "{what}: expected {ROWS_8}, got shape ({rows}, {cols})"
         ))
-        .into());
+        .into()),
     }
-    let view = array.as_array();
-    Ok(Input::Rows(
-        view.rows()
-            .into_iter()
-            .map(|r| std::array::from_fn(|j| r[j]))
-            .collect(),
-    ))
+}
+
+/// Row-major numbers as rows of `N`.
+pub fn rows_of<const N: usize>(data: &[f64]) -> Vec<[f64; N]> {
+    data.chunks_exact(N)
+        .map(|r| std::array::from_fn(|j| r[j]))
+        .collect()
 }
 
 /// The options of reading an estimate file.
@@ -93,28 +121,32 @@ pub fn parse_format(format: Option<&str>) -> Result<Option<eval_metrics::Traject
 }
 
 /// The estimate: a file read as `monovo eval` reads it, or rows checked as its parser checks
-/// them (a zero quaternion is an error).
+/// them.
 pub fn trajectory(input: &Input, opts: &ReadOptions) -> Result<Trajectory> {
     match input {
         Input::Path(p) => Ok(load_trajectory(p, opts.format, opts.times.as_deref())?),
-        Input::Rows(rows) => {
-            let mut poses = Vec::with_capacity(rows.len());
-            for (i, v) in rows.iter().enumerate() {
-                let n2: f64 = v[4..].iter().map(|x| x * x).sum();
-                if n2.is_finite() && n2 < 1e-12 {
-                    return Err(Error::format(format!(
-                        "the estimate: row {i}: not a rotation: the quaternion is zero"
-                    )));
-                }
-                poses.push(Pose {
-                    t: v[0],
-                    position: Vector3::new(v[1], v[2], v[3]),
-                    orientation: Quaternion::new(v[7], v[4], v[5], v[6]),
-                });
-            }
-            Ok(Trajectory { poses })
-        }
+        Input::Rows(rows) => rows_trajectory(rows, "the estimate"),
     }
+}
+
+/// Rows `t x y z qx qy qz qw` as a trajectory, checked as the TUM parser checks a file (a zero
+/// quaternion is an error); `what` names it in errors.
+pub fn rows_trajectory(rows: &[[f64; 8]], what: &str) -> Result<Trajectory> {
+    let mut poses = Vec::with_capacity(rows.len());
+    for (i, v) in rows.iter().enumerate() {
+        let n2: f64 = v[4..].iter().map(|x| x * x).sum();
+        if n2.is_finite() && n2 < 1e-12 {
+            return Err(Error::format(format!(
+                "{what}: row {i}: not a rotation: the quaternion is zero"
+            )));
+        }
+        poses.push(Pose {
+            t: v[0],
+            position: Vector3::new(v[1], v[2], v[3]),
+            orientation: Quaternion::new(v[7], v[4], v[5], v[6]),
+        });
+    }
+    Ok(Trajectory { poses })
 }
 
 /// The ground truth: a file or a sequence folder read as `monovo eval --gt` reads it, or

@@ -13,6 +13,7 @@ mod arrays;
 mod camera;
 mod errors;
 mod eval;
+mod metrics;
 mod photometric_py;
 mod sequence;
 
@@ -22,6 +23,7 @@ fn _monovo(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("JPEG_DECODER", dataset_io::JPEG_DECODER)?;
     eval::register(m)?;
+    metrics::register(m)?;
     sequence::register(m)?;
     camera::register(m)?;
     photometric_py::register(m)?;

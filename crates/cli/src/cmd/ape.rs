@@ -1,12 +1,12 @@
 //! `monovo ape`: the absolute pose error as evo's `evo_ape` (or, with `--tum`, the TUM RGB-D
 //! `evaluate_ate.py`) computes it.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Parser;
-use eval_metrics::{ApeOptions, ExtraMetric, TumAteOptions};
-use monovo_pipelines::{run_ape, run_tum_ate};
+use eval_metrics::ExtraMetric;
+use monovo_pipelines::{run_metric, MetricArgs, Spelling};
 
-use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArg, SyncArgs};
+use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArgs};
 
 /// Arguments of `monovo ape`.
 #[derive(clap::Args, Debug)]
@@ -62,32 +62,15 @@ pub struct Args {
 
 /// The metric the arguments ask for: evo's APE, or evaluate_ate.py's with --tum.
 pub fn metric(args: &Args) -> Result<ExtraMetric> {
-    if !args.tum {
-        return Ok(ExtraMetric::Ape(ApeOptions {
-            relation: args.pose_relation.relation(),
-            align: args.align.options()?,
-            sync: args.sync.options(),
-        }));
-    }
-    let a = &args.align;
-    if a.correct_scale || a.align_origin || a.posyaw || a.n_to_align != -1 {
-        bail!("--tum aligns as evaluate_ate.py does (Horn's SE(3) over all pairs, no scale): -s, --align-origin, --posyaw and --n-to-align do not apply; use --scale for a fixed factor");
-    }
-    if !matches!(
-        args.pose_relation,
-        RelationArg::TransPart | RelationArg::PointDistance
-    ) {
-        bail!("--tum measures translations only (evaluate_ate.py); drop --pose-relation");
-    }
-    let s = &args.sync;
-    if s.sync_method != SyncArg::NearestTime || s.t_start.is_some() || s.t_end.is_some() {
-        bail!("--tum associates as associate.py does: --sync-method, --t-start and --t-end do not apply");
-    }
-    Ok(ExtraMetric::TumAte(TumAteOptions {
-        max_difference: s.t_max_diff.unwrap_or(0.02),
-        offset: s.t_offset,
-        scale: args.scale.unwrap_or(1.0),
-    }))
+    let mut a = MetricArgs {
+        pose_relation: args.pose_relation.relation(),
+        tum: args.tum,
+        scale: args.scale,
+        ..MetricArgs::default()
+    };
+    args.align.apply(&mut a);
+    args.sync.apply(&mut a);
+    a.ape(Spelling::Flags).map_err(anyhow::Error::msg)
 }
 
 /// `monovo ape`'s options alone, for `eval-batch --ape FLAGS`.
@@ -109,10 +92,6 @@ pub fn metric_from_flags(flags: &str) -> Result<ExtraMetric> {
 pub fn run(args: &Args) -> Result<()> {
     let (format, reference, estimate) = args.inputs.resolve()?;
     args.out.check()?;
-    let report = match metric(args)? {
-        ExtraMetric::TumAte(o) => run_tum_ate(reference, estimate, format, &o)?,
-        ExtraMetric::Ape(o) => run_ape(reference, estimate, format, &o)?,
-        _ => unreachable!("monovo ape asks for an APE"),
-    };
+    let report = run_metric(reference, estimate, format, &metric(args)?)?;
     args.out.finish(&report)
 }

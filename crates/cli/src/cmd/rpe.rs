@@ -1,12 +1,12 @@
 //! `monovo rpe`: the relative pose error as evo's `evo_rpe` (or, with `--tum`, the TUM RGB-D
 //! `evaluate_rpe.py`) computes it.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Parser;
-use eval_metrics::{DeltaUnit, ExtraMetric, RpeOptions, TumDeltaUnit, TumRpeOptions};
-use monovo_pipelines::{run_rpe, run_tum_rpe};
+use eval_metrics::ExtraMetric;
+use monovo_pipelines::{run_metric, MetricArgs, RpeUnit, Spelling};
 
-use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArg, SyncArgs};
+use super::traj::{AlignArgs, Inputs, OutputArgs, RelationArg, SyncArgs};
 
 /// The unit of the delta.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -100,15 +100,14 @@ pub struct Args {
         conflicts_with = "all_pairs"
     )]
     pub fixed_delta: bool,
-    /// With --tum: at most this many pairs, drawn at random beyond (0: all).
+    /// With --tum: at most this many pairs, drawn at random beyond (0: all) [default: 10000].
     #[arg(
         long = "max-pairs",
         alias = "max_pairs",
-        default_value_t = 10_000,
         value_name = "N",
         requires = "tum"
     )]
-    pub max_pairs: usize,
+    pub max_pairs: Option<usize>,
     /// With --tum: a fixed factor for the estimate's motions (the script's --scale).
     #[arg(long, value_name = "FACTOR", requires = "tum")]
     pub scale: Option<f64>,
@@ -118,60 +117,27 @@ pub struct Args {
 
 /// The metric the arguments ask for: evo's RPE, or evaluate_rpe.py's with --tum.
 pub fn metric(args: &Args) -> Result<ExtraMetric> {
-    Ok(if args.tum {
-        if args.align.any() {
-            bail!("--tum compares motions as evaluate_rpe.py does, without alignment: -a, -s, --align-origin, --posyaw and --n-to-align do not apply; use --scale for a fixed factor");
-        }
-        if args.pose_relation != RelationArg::TransPart {
-            bail!("--tum reports the translational and the rotational error together (evaluate_rpe.py); drop --pose-relation");
-        }
-        let s = &args.sync;
-        if args.pairs_from_reference
-            || s.t_max_diff.is_some()
-            || s.sync_method != SyncArg::NearestTime
-            || s.t_start.is_some()
-            || s.t_end.is_some()
-        {
-            bail!("--tum pairs poses as evaluate_rpe.py does: --pairs-from-reference, --t-max-diff, --sync-method, --t-start and --t-end do not apply");
-        }
-        let delta_unit = match args.delta_unit.unwrap_or(UnitArg::S) {
-            UnitArg::S => TumDeltaUnit::Seconds,
-            UnitArg::M => TumDeltaUnit::Meters,
-            UnitArg::R => TumDeltaUnit::Radians,
-            UnitArg::D => TumDeltaUnit::Degrees,
-            UnitArg::F => TumDeltaUnit::Frames,
-        };
-        let opts = TumRpeOptions {
-            fixed_delta: !args.all_pairs,
-            delta: args.delta,
-            delta_unit,
-            max_pairs: args.max_pairs,
-            offset: s.t_offset,
-            scale: args.scale.unwrap_or(1.0),
-        };
-        ExtraMetric::TumRpe(opts)
-    } else {
-        let delta_unit = match args.delta_unit.unwrap_or(UnitArg::F) {
-            UnitArg::F => DeltaUnit::Frames,
-            UnitArg::M => DeltaUnit::Meters,
-            UnitArg::D => DeltaUnit::Degrees,
-            UnitArg::R => DeltaUnit::Radians,
-            UnitArg::S => bail!(
-                "--delta-unit s: evo has no delta in seconds; use f, m, d or r, or --tum for evaluate_rpe.py"
-            ),
-        };
-        let opts = RpeOptions {
-            relation: args.pose_relation.relation(),
-            delta: args.delta,
-            delta_unit,
-            delta_tol: args.delta_tol,
-            all_pairs: args.all_pairs,
-            pairs_from_reference: args.pairs_from_reference,
-            align: args.align.options()?,
-            sync: args.sync.options(),
-        };
-        ExtraMetric::Rpe(opts)
-    })
+    let mut a = MetricArgs {
+        pose_relation: args.pose_relation.relation(),
+        tum: args.tum,
+        scale: args.scale,
+        delta: args.delta,
+        delta_unit: args.delta_unit.map(|u| match u {
+            UnitArg::F => RpeUnit::Frames,
+            UnitArg::M => RpeUnit::Meters,
+            UnitArg::D => RpeUnit::Degrees,
+            UnitArg::R => RpeUnit::Radians,
+            UnitArg::S => RpeUnit::Seconds,
+        }),
+        delta_tol: args.delta_tol,
+        all_pairs: args.all_pairs,
+        pairs_from_reference: args.pairs_from_reference,
+        max_pairs: args.max_pairs,
+        ..MetricArgs::default()
+    };
+    args.align.apply(&mut a);
+    args.sync.apply(&mut a);
+    a.rpe(Spelling::Flags).map_err(anyhow::Error::msg)
 }
 
 /// `monovo rpe`'s options alone, for `eval-batch --rpe FLAGS`.
@@ -193,10 +159,6 @@ pub fn metric_from_flags(flags: &str) -> Result<ExtraMetric> {
 pub fn run(args: &Args) -> Result<()> {
     let (format, reference, estimate) = args.inputs.resolve()?;
     args.out.check()?;
-    let report = match metric(args)? {
-        ExtraMetric::TumRpe(o) => run_tum_rpe(reference, estimate, format, &o)?,
-        ExtraMetric::Rpe(o) => run_rpe(reference, estimate, format, &o)?,
-        _ => unreachable!("monovo rpe asks for an RPE"),
-    };
+    let report = run_metric(reference, estimate, format, &metric(args)?)?;
     args.out.finish(&report)
 }

@@ -5,10 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
-use eval_metrics::{
-    AlignMode, AlignOptions, PoseRelation, SyncMethod, SyncOptions, TrajectoryFormat,
-};
-use monovo_pipelines::{metric_figure, save_evo_result, MetricReport, PlotX};
+use eval_metrics::{AlignOptions, PoseRelation, SyncMethod, TrajectoryFormat};
+use monovo_pipelines::{metric_figure, save_evo_result, MetricArgs, MetricReport, PlotX, Spelling};
 
 use crate::plot;
 
@@ -127,34 +125,20 @@ pub struct AlignArgs {
 }
 
 impl AlignArgs {
-    /// The library's options.
-    pub fn options(&self) -> Result<AlignOptions> {
-        let mode = match (self.align, self.correct_scale, self.posyaw) {
-            (_, _, true) => AlignMode::PosYaw,
-            (true, true, _) => AlignMode::Sim3,
-            (true, false, _) => AlignMode::Se3,
-            (false, true, _) => AlignMode::Scale,
-            (false, false, _) => AlignMode::None,
-        };
-        let n_to_align = match self.n_to_align {
-            -1 => None,
-            n if n >= 1 => Some(n as usize),
-            n => bail!("--n_to_align {n}: expected a number of poses of at least 1, or -1 for all"),
-        };
-        Ok(AlignOptions {
-            mode,
-            n_to_align,
-            origin: self.align_origin,
-        })
+    /// Sets the alignment options.
+    pub fn apply(&self, a: &mut MetricArgs) {
+        a.align = self.align;
+        a.correct_scale = self.correct_scale;
+        a.n_to_align = self.n_to_align;
+        a.align_origin = self.align_origin;
+        a.posyaw = self.posyaw;
     }
 
-    /// Whether any alignment was asked for.
-    pub fn any(&self) -> bool {
-        self.align
-            || self.correct_scale
-            || self.align_origin
-            || self.posyaw
-            || self.n_to_align != -1
+    /// The library's alignment options.
+    pub fn options(&self) -> Result<AlignOptions> {
+        let mut a = MetricArgs::default();
+        self.apply(&mut a);
+        a.align_options(Spelling::Flags).map_err(anyhow::Error::msg)
     }
 }
 
@@ -215,18 +199,16 @@ pub struct SyncArgs {
 }
 
 impl SyncArgs {
-    /// The library's options.
-    pub fn options(&self) -> SyncOptions {
-        SyncOptions {
-            max_diff: self.t_max_diff.unwrap_or(0.01),
-            offset: self.t_offset,
-            method: match self.sync_method {
-                SyncArg::NearestTime => SyncMethod::NearestTime,
-                SyncArg::Interpolation => SyncMethod::Interpolation,
-            },
-            t_start: self.t_start,
-            t_end: self.t_end,
-        }
+    /// Sets the association options.
+    pub fn apply(&self, a: &mut MetricArgs) {
+        a.t_max_diff = self.t_max_diff;
+        a.t_offset = self.t_offset;
+        a.sync_method = match self.sync_method {
+            SyncArg::NearestTime => SyncMethod::NearestTime,
+            SyncArg::Interpolation => SyncMethod::Interpolation,
+        };
+        a.t_start = self.t_start;
+        a.t_end = self.t_end;
     }
 }
 
