@@ -283,6 +283,95 @@ fn run_kitti(b: &[u8]) -> bool {
     eval_metrics::parse_kitti(poses, times).is_ok_and(|tr| evaluate(&tr))
 }
 
+/// A KITTI pose file (no times), then the devkit's segment errors and evo's APE and RPE of it
+/// against itself (paired by line).
+fn run_kitti_poses(b: &[u8]) -> bool {
+    let Ok(t) = eval_metrics::parse_kitti_poses(&text(b)) else {
+        return false;
+    };
+    if t.len() <= 1024 {
+        let _ = eval_metrics::kitti_errors(&[(t.clone(), t.clone())]);
+        let mut o = eval_metrics::ApeOptions::default();
+        o.align.mode = eval_metrics::AlignMode::Sim3;
+        let _ = eval_metrics::ape(&t, &t, &o);
+        let _ = eval_metrics::rpe(&t, &t, &eval_metrics::RpeOptions::default());
+    }
+    true
+}
+
+/// A TUM trajectory as the estimate of every metric (evo's APE and RPE with several options,
+/// the TUM scripts' ATE and RPE, the KITTI segments) against a reference made from it: moved
+/// by a similarity and 1 ms later, so that the poses associate and every step runs.
+fn run_metrics(b: &[u8]) -> bool {
+    let Ok(t) = eval_metrics::parse_tum(&text(b)) else {
+        return false;
+    };
+    if t.poses.len() > 512 {
+        return true;
+    }
+    let est = eval_metrics::PoseTrack::from_trajectory(&t);
+    let mut reference = est.clone();
+    let r = eval_metrics::nalgebra::Rotation3::from_euler_angles(0.1, -0.2, 0.3);
+    for p in &mut reference.positions {
+        *p = r * *p * 1.3 + eval_metrics::nalgebra::Vector3::new(1.0, 2.0, 3.0);
+    }
+    for m in &mut reference.rotations {
+        *m = r.matrix() * *m;
+    }
+    if let Some(times) = reference.times.as_mut() {
+        times.iter_mut().for_each(|x| *x += 0.001);
+    }
+    let reference = &reference;
+    let h = input_hash(b);
+    let mut ape = eval_metrics::ApeOptions::default();
+    ape.align.mode = [
+        eval_metrics::AlignMode::None,
+        eval_metrics::AlignMode::Se3,
+        eval_metrics::AlignMode::Sim3,
+        eval_metrics::AlignMode::Scale,
+        eval_metrics::AlignMode::PosYaw,
+    ][(h % 5) as usize];
+    ape.align.origin = h.is_multiple_of(7);
+    ape.relation = [
+        eval_metrics::PoseRelation::TransPart,
+        eval_metrics::PoseRelation::AngleDeg,
+        eval_metrics::PoseRelation::Full,
+    ][(h % 3) as usize];
+    ape.sync.max_diff = 0.03;
+    if h.is_multiple_of(2) {
+        ape.sync.method = eval_metrics::SyncMethod::Interpolation;
+    }
+    let _ = eval_metrics::ape(reference, &est, &ape);
+    let mut rpe = eval_metrics::RpeOptions {
+        align: ape.align,
+        sync: ape.sync,
+        all_pairs: h.is_multiple_of(3),
+        pairs_from_reference: h.is_multiple_of(5),
+        ..eval_metrics::RpeOptions::default()
+    };
+    (rpe.delta_unit, rpe.delta) = [
+        (eval_metrics::DeltaUnit::Frames, 2.0),
+        (eval_metrics::DeltaUnit::Meters, 0.3),
+        (eval_metrics::DeltaUnit::Degrees, 5.0),
+        (eval_metrics::DeltaUnit::Radians, 0.1),
+    ][(h / 7 % 4) as usize];
+    let _ = eval_metrics::rpe(reference, &est, &rpe);
+    let _ = eval_metrics::tum_ate(reference, &est, &eval_metrics::TumAteOptions::default());
+    let tum = eval_metrics::TumRpeOptions {
+        fixed_delta: !h.is_multiple_of(4),
+        max_pairs: 500,
+        ..eval_metrics::TumRpeOptions::default()
+    };
+    let _ = eval_metrics::tum_rpe(reference, &est, &tum);
+    let _ = eval_metrics::ExtraMetric::Kitti(ape.align).compute(reference, &est);
+    true
+}
+
+/// An experiment manifest, with the [ape], [rpe] and [kitti] tables of the other metrics.
+fn run_manifest(b: &[u8]) -> bool {
+    monovo_pipelines::Experiment::parse(&text(b), Path::new("exp.toml"), Path::new("base")).is_ok()
+}
+
 fn run_plane_poses(b: &[u8]) -> bool {
     photometric::marker::parse_plane_poses(&text(b)).is_ok()
 }
@@ -558,6 +647,19 @@ fn text_seeds_generated() -> (Vec<u8>, Vec<u8>, Vec<u8>, Vec<u8>) {
                     }
                 },
                 poses: 100,
+                // the other metrics' columns: APE and KITTI for some runs
+                extra: if i % 2 == 0 {
+                    [
+                        ("ape_rmse", 0.1),
+                        ("ape_max", f64::INFINITY),
+                        ("kitti_t_err", 1.5),
+                    ]
+                    .into_iter()
+                    .map(|(k, v)| (k.to_string(), v * f64::from(i + 1)))
+                    .collect()
+                } else {
+                    Default::default()
+                },
             }
         })
         .collect();
@@ -753,7 +855,7 @@ fn targets(root: &Path) -> Result<Vec<Target>> {
         Target {
             id: "tum",
             what: "TUM trajectory",
-            seeds: tum,
+            seeds: tum.clone(),
             text: true,
             run: run_tum,
         },
@@ -771,9 +873,43 @@ fn targets(root: &Path) -> Result<Vec<Target>> {
         Target {
             id: "kitti",
             what: "KITTI trajectory and times",
-            seeds: vec![kitti],
+            seeds: vec![kitti.clone()],
             text: true,
             run: run_kitti,
+        },
+        Target {
+            id: "kitti-poses",
+            what: "KITTI pose file (ape, rpe, kitti)",
+            seeds: {
+                let k = String::from_utf8_lossy(&kitti).into_owned();
+                let mut s = vec![k.split("\n---\n").next().unwrap_or("").as_bytes().to_vec()];
+                s.extend(fixtures(root, "../metrics", true, 8192)?.into_iter().filter(|f| {
+                    f.split(|c| *c == b'\n').next().is_some_and(|l| {
+                        l.split(|c| *c == b' ').filter(|w| !w.is_empty()).count() == 12
+                    })
+                }));
+                s
+            },
+            text: true,
+            run: run_kitti_poses,
+        },
+        Target {
+            id: "metrics",
+            what: "TUM trajectory through every metric (ape, rpe, --tum, kitti)",
+            seeds: tum,
+            text: true,
+            run: run_metrics,
+        },
+        Target {
+            id: "manifest",
+            what: "experiment manifest TOML",
+            seeds: vec![
+                std::fs::read(root.join("data/experiment.toml"))
+                    .context("data/experiment.toml")?,
+                b"dataset = \"d\"\nresults = \"r\"\nmetrics = [\"e_align\", \"ape_rmse\", \"rpe_mean\", \"kitti_t_err\"]\n[[method]]\nname = \"a\"\n[ape]\nalign = \"sim3\"\npose_relation = \"angle_deg\"\n[rpe]\ntum = true\ndelta = 1\ndelta_unit = \"s\"\n[kitti]\nalign = \"se3\"\n".to_vec(),
+            ],
+            text: true,
+            run: run_manifest,
         },
         Target {
             id: "poses",

@@ -16,7 +16,8 @@ mod progress;
 /// monovo: the photometrically calibrated monocular VO benchmark, as one fast command.
 ///
 /// Read and rectify the benchmark's sequences, calibrate response and vignetting of your own
-/// camera, and score trajectories with the paper's loop-closure drift metrics.
+/// camera, and score trajectories with the paper's loop-closure drift metrics and the field's
+/// other metrics (APE and RPE as evo and the TUM scripts define them, KITTI's segment errors).
 #[derive(Parser, Debug)]
 #[command(name = "monovo", version, about, long_about = None, propagate_version = true)]
 struct Cli {
@@ -40,6 +41,12 @@ enum Command {
     Exposure(cmd::exposure::Args),
     /// Score one trajectory with the paper's loop-closure drift metrics.
     Eval(cmd::eval::Args),
+    /// Absolute pose error (APE/ATE) as evo computes it, or the TUM RGB-D script (--tum).
+    Ape(cmd::ape::Args),
+    /// Relative pose error (RPE) as evo computes it, or the TUM RGB-D script (--tum).
+    Rpe(cmd::rpe::Args),
+    /// The KITTI odometry devkit's segment errors (% and deg/100m over 100..800 m).
+    Kitti(cmd::kitti::Args),
     /// Score every run of a results tree in parallel into results.csv.
     EvalBatch(cmd::eval_batch::Args),
     /// Evaluate methods and variations named in a TOML manifest into grouped plots and tables.
@@ -84,6 +91,9 @@ fn main() -> ExitCode {
         Command::Calib(args) => cmd::calib::run(&args),
         Command::Exposure(args) => cmd::exposure::run(&args),
         Command::Eval(args) => cmd::eval::run(&args),
+        Command::Ape(args) => cmd::ape::run(&args),
+        Command::Rpe(args) => cmd::rpe::run(&args),
+        Command::Kitti(args) => cmd::kitti::run(&args),
         Command::EvalBatch(args) => cmd::eval_batch::run(&args),
         Command::Experiment(args) => cmd::experiment::run(&args),
         Command::Plot(args) => cmd::plot::run(&args),

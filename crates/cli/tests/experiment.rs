@@ -65,21 +65,35 @@ fn the_example_manifest_draws_grouped_plots_and_tables() {
     .collect();
     assert_eq!(groups, want);
     // one figure per metric: two panels of 560x430 side by side and the shared legend
-    for m in ["e_align", "e_r", "e_s"] {
+    for m in ["e_align", "e_r", "e_s", "ape_rmse"] {
         check_png(&out.join(format!("cumulative_{m}.png")), 1120, 500);
+        // and a box per method in a panel per variation
+        check_png(&out.join(format!("box_{m}.png")), 1120, 430);
     }
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(md.contains("| forward | direct | 8 |"), "{md}");
     assert!(md.contains("| backward | feature | 8 |"), "{md}");
     let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
     assert!(
-        csv.starts_with("variation,method,runs,failed,median_e_align,median_e_r,median_e_s\n"),
+        csv.starts_with(
+            "variation,method,runs,failed,median_e_align,median_e_r,median_e_s,median_ape_rmse\n"
+        ),
         "{csv}"
     );
     assert_eq!(csv.lines().count(), 5);
     let fwd = std::fs::read_to_string(out.join("results_forward.csv")).unwrap();
     assert_eq!(fwd.lines().count(), 17, "16 forwards runs and the header");
     assert!(fwd.lines().skip(1).all(|l| l.contains(",fwd,")));
+    // the APE columns, Sim(3)-aligned over the segments: e_rmse is the same number
+    let rows = eval_metrics::parse_csv(&fwd).unwrap();
+    for r in rows.iter().filter(|r| r.is_ok()) {
+        let ape = r.extra["ape_rmse"];
+        assert!(
+            (ape - r.metrics.e_rmse).abs() <= 1e-9 * ape,
+            "{ape} {}",
+            r.metrics.e_rmse
+        );
+    }
     // the same through eval-batch, refusing the existing folder without --force
     let o = monovo(&[
         "eval-batch",

@@ -10,5 +10,6 @@ mod experiment;
 mod exposure;
 mod faults;
 mod figures;
+mod metrics;
 mod rectify;
 mod terminal;

@@ -59,5 +59,5 @@ pub use temporaries::{
     remove_stale as remove_stale_temporaries, temp_sibling,
 };
 pub use times::{ns_to_seconds_text, parse_times, seconds_to_ns, times_text, TimeRow, Times};
-pub use writer::{write_images_zip, SequenceWriter};
+pub use writer::{write_images_zip, write_stored_zip, SequenceWriter};
 pub use zipimages::ImagesZip;

@@ -120,6 +120,15 @@ pub fn write_images_zip(
     path: &Path,
     entries: impl IntoIterator<Item = (String, Vec<u8>)>,
 ) -> Result<(), DatasetError> {
+    write_stored_zip(path, entries)
+}
+
+/// Writes a zip of named files, stored (not compressed) in the given order, atomically: an
+/// images.zip, or an evo result zip (`info.json`, `stats.json`, `*.npy`).
+pub fn write_stored_zip(
+    path: &Path,
+    entries: impl IntoIterator<Item = (String, Vec<u8>)>,
+) -> Result<(), DatasetError> {
     crate::write_atomic_with(path, |w| {
         let mut z = zip::ZipWriter::new(&mut *w);
         for (name, bytes) in entries {

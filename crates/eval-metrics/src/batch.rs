@@ -9,6 +9,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::evaluate::{evaluate, FailReason, Metrics};
+use crate::extra::{batch_track, ExtraMetric, EXTRA_COLUMNS};
+use crate::metric::Metric;
 use crate::trajectory::{GroundTruth, Trajectory};
 use crate::EvalError;
 
@@ -75,111 +77,16 @@ pub struct RunRecord {
     pub metrics: Metrics,
     /// Number of estimated poses.
     pub poses: usize,
+    /// The field's other metrics computed for the run ([`crate::ExtraMetric`]), by column
+    /// name (`ape_rmse`, ...; infinite where they could not be computed).
+    #[serde(default)]
+    pub extra: BTreeMap<String, f64>,
 }
 
 impl RunRecord {
     /// Whether the run succeeded.
     pub fn is_ok(&self) -> bool {
         self.failure.is_none()
-    }
-}
-
-/// A metric to summarise or plot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum Metric {
-    /// `e_align`.
-    #[serde(rename = "e_align")]
-    EAlign,
-    /// `e_r` in degrees.
-    #[serde(rename = "e_r")]
-    ER,
-    /// `e'_s = max(e_s, 1/e_s)` (the paper's summary of the scale drift).
-    #[serde(rename = "e_s")]
-    ES,
-    /// `e_t`.
-    #[serde(rename = "e_t")]
-    ET,
-    /// `e_rmse`.
-    #[serde(rename = "e_rmse")]
-    ERmse,
-    /// Start-segment RMSE.
-    #[serde(rename = "rmse_start")]
-    RmseStart,
-    /// End-segment RMSE.
-    #[serde(rename = "rmse_end")]
-    RmseEnd,
-}
-
-impl Metric {
-    /// Every metric.
-    pub const ALL: [Metric; 7] = [
-        Metric::EAlign,
-        Metric::ER,
-        Metric::ES,
-        Metric::ET,
-        Metric::ERmse,
-        Metric::RmseStart,
-        Metric::RmseEnd,
-    ];
-
-    /// The metric's value in a run (infinite when failed).
-    pub fn value(self, m: &Metrics) -> f64 {
-        match self {
-            Metric::EAlign => m.e_align,
-            Metric::ER => m.e_r,
-            Metric::ES => m.e_s_sym(),
-            Metric::ET => m.e_t,
-            Metric::ERmse => m.e_rmse,
-            Metric::RmseStart => m.rmse_start,
-            Metric::RmseEnd => m.rmse_end,
-        }
-    }
-
-    /// Short name as used on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Metric::EAlign => "e_align",
-            Metric::ER => "e_r",
-            Metric::ES => "e_s",
-            Metric::ET => "e_t",
-            Metric::ERmse => "e_rmse",
-            Metric::RmseStart => "rmse_start",
-            Metric::RmseEnd => "rmse_end",
-        }
-    }
-
-    /// Axis label for plots, with the unit: degrees for `e_r`, a multiplier for `e'_s`, and
-    /// the ground truth's length unit for the others.
-    pub fn label(self) -> &'static str {
-        match self {
-            Metric::EAlign => "alignment error e_align (ground-truth length unit)",
-            Metric::ER => "rotation drift e_r (degrees)",
-            Metric::ES => "scale drift e'_s = max(e_s, 1/e_s) (multiplier)",
-            Metric::ET => "translation drift e_t (ground-truth length unit)",
-            Metric::ERmse => "joint alignment RMSE e_rmse (ground-truth length unit)",
-            Metric::RmseStart => "start-segment RMSE (ground-truth length unit)",
-            Metric::RmseEnd => "end-segment RMSE (ground-truth length unit)",
-        }
-    }
-
-    /// Whether the metric is a multiplier that is at least 1 (`e'_s`): its axis starts at 1.
-    pub fn is_multiplier(self) -> bool {
-        self == Metric::ES
-    }
-}
-
-impl FromStr for Metric {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Metric::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| {
-                format!(
-                    "unknown metric `{s}`, expected one of {}",
-                    Metric::ALL.map(|m| m.name()).join(", ")
-                )
-            })
     }
 }
 
@@ -201,6 +108,26 @@ where
     G: Fn(&RunKey) -> Option<&'g GroundTruth> + Sync,
     P: Fn() + Sync,
 {
+    evaluate_batch_with(jobs, key, load, ground_truth, &[], on_done)
+}
+
+/// [`evaluate_batch`] with the field's other metrics computed for every run as well (their
+/// columns in [`RunRecord::extra`]; infinite where a metric cannot be computed).
+pub fn evaluate_batch_with<'g, J, E, L, G, P>(
+    jobs: &[J],
+    key: impl Fn(&J) -> RunKey + Sync,
+    load: L,
+    ground_truth: G,
+    extra: &[ExtraMetric],
+    on_done: P,
+) -> Vec<Result<RunRecord, E>>
+where
+    J: Sync,
+    E: Send,
+    L: Fn(&J) -> Result<Trajectory, E> + Sync,
+    G: Fn(&RunKey) -> Option<&'g GroundTruth> + Sync,
+    P: Fn() + Sync,
+{
     jobs.par_iter()
         .map(|job| {
             let key = key(job);
@@ -211,6 +138,7 @@ where
                         failure: ev.failure.as_ref().map(|f| f.to_string()),
                         metrics: ev.metrics,
                         poses: ev.poses,
+                        extra: extra_values(extra, &traj, gt),
                         key,
                     }
                 }
@@ -223,6 +151,7 @@ where
                     ),
                     metrics: Metrics::FAILED,
                     poses: traj.poses.len(),
+                    extra: failed_extra(extra),
                     key,
                 },
             });
@@ -230,6 +159,36 @@ where
             out
         })
         .collect()
+}
+
+/// The columns of the extra metrics, all infinite (a failed run).
+pub fn failed_extra(extra: &[ExtraMetric]) -> BTreeMap<String, f64> {
+    extra
+        .iter()
+        .flat_map(|m| m.columns().iter().map(|c| (c.to_string(), f64::INFINITY)))
+        .collect()
+}
+
+/// The extra metrics of one run.
+fn extra_values(
+    extra: &[ExtraMetric],
+    traj: &Trajectory,
+    gt: &GroundTruth,
+) -> BTreeMap<String, f64> {
+    let mut out = failed_extra(extra);
+    if extra.is_empty() || traj.poses.is_empty() {
+        return out;
+    }
+    let reference = gt.track();
+    let estimate = batch_track(traj, gt.times()[0]);
+    for m in extra {
+        if let Ok(values) = m.compute(&reference, &estimate) {
+            for (c, v) in m.columns().iter().zip(values) {
+                out.insert(c.to_string(), v);
+            }
+        }
+    }
+    out
 }
 
 /// The header of results.csv: one row per run; `reason` says why a failed run failed.
@@ -275,16 +234,21 @@ struct CsvRow {
 mod csv_float {
     use serde::{Deserialize, Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    /// A float as results.csv writes it.
+    pub fn text(v: f64) -> String {
         if v.is_finite() {
-            s.serialize_str(&format!("{v}"))
+            format!("{v}")
         } else if v.is_nan() {
-            s.serialize_str("NaN")
-        } else if *v > 0.0 {
-            s.serialize_str("inf")
+            "NaN".into()
+        } else if v > 0.0 {
+            "inf".into()
         } else {
-            s.serialize_str("-inf")
+            "-inf".into()
         }
+    }
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&text(*v))
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
@@ -344,6 +308,7 @@ impl From<CsvRow> for RunRecord {
                 rmse_end: r.rmse_end,
             },
             poses: r.poses,
+            extra: BTreeMap::new(),
         }
     }
 }
@@ -362,18 +327,59 @@ fn csv_error(e: &csv::Error) -> EvalError {
 }
 
 /// Writes records as results.csv (RFC 4180 quoting, so commas, quotes and line breaks in
-/// names and reasons survive; metrics at full precision, infinities as `inf`).
+/// names and reasons survive; metrics at full precision, infinities as `inf`). The columns of
+/// the field's other metrics that any record has ([`crate::EXTRA_COLUMNS`]) come before
+/// `reason`; without them the header is exactly [`CSV_HEADER`].
 pub fn write_csv(records: &[RunRecord]) -> String {
+    let extras: Vec<&str> = EXTRA_COLUMNS
+        .into_iter()
+        .filter(|c| records.iter().any(|r| r.extra.contains_key(*c)))
+        .collect();
     let mut w = csv::WriterBuilder::new()
         .has_headers(false)
-        .from_writer(Vec::with_capacity(records.len() * 160 + 128));
+        .from_writer(Vec::with_capacity(
+            records.len() * (160 + 20 * extras.len()) + 128,
+        ));
     let mut out = String::with_capacity(records.len() * 160 + 128);
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    out.push_str(CSV_HEADER.trim_end_matches(",reason"));
+    for c in &extras {
+        out.push(',');
+        out.push_str(c);
+    }
+    out.push_str(",reason\n");
     for r in records {
-        // Writing to a Vec cannot fail, and every field serialises to text.
-        if let Err(e) = w.serialize(CsvRow::from(r)) {
-            unreachable!("serialising a results row to memory: {e}");
+        let row = CsvRow::from(r);
+        let m = &r.metrics;
+        let mut fields: Vec<String> = vec![
+            row.method,
+            row.sequence,
+            row.direction.as_str().to_string(),
+            row.run.to_string(),
+            if r.is_ok() { "ok" } else { "failed" }.to_string(),
+        ];
+        for v in [
+            m.e_align,
+            m.e_s,
+            m.e_r,
+            m.e_t,
+            m.e_rmse,
+            m.rmse_start,
+            m.rmse_end,
+        ] {
+            fields.push(csv_float::text(v));
+        }
+        fields.push(r.poses.to_string());
+        for c in &extras {
+            fields.push(
+                r.extra
+                    .get(*c)
+                    .map_or(String::new(), |v| csv_float::text(*v)),
+            );
+        }
+        fields.push(row.reason);
+        // Writing to a Vec cannot fail.
+        if let Err(e) = w.write_record(&fields) {
+            unreachable!("writing a results row to memory: {e}");
         }
     }
     match w.into_inner() {
@@ -385,7 +391,8 @@ pub fn write_csv(records: &[RunRecord]) -> String {
 
 /// Reads results.csv as written by [`write_csv`]: columns by name in any order, the 13 of
 /// [`CSV_HEADER`] before `reason` required, `reason` optional (a failed run without one gets
-/// an empty reason, never an invented one). Errors name the line.
+/// an empty reason, never an invented one), the columns of the field's other metrics read
+/// where present (an empty cell: not computed). Errors name the line.
 pub fn parse_csv(text: &str) -> Result<Vec<RunRecord>, EvalError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut rd = csv::ReaderBuilder::new()
@@ -403,9 +410,29 @@ pub fn parse_csv(text: &str) -> Result<Vec<RunRecord>, EvalError> {
             found: headers.iter().collect::<Vec<_>>().join(","),
         });
     }
-    rd.deserialize::<CsvRow>()
-        .map(|row| row.map(RunRecord::from).map_err(|e| csv_error(&e)))
-        .collect()
+    let extras: Vec<(usize, &str)> = EXTRA_COLUMNS
+        .into_iter()
+        .filter_map(|c| headers.iter().position(|h| h == c).map(|i| (i, c)))
+        .collect();
+    let mut out = Vec::new();
+    for rec in rd.records() {
+        let rec = rec.map_err(|e| csv_error(&e))?;
+        let row: CsvRow = rec.deserialize(Some(&headers)).map_err(|e| csv_error(&e))?;
+        let mut r = RunRecord::from(row);
+        for &(i, c) in &extras {
+            let cell = rec.get(i).unwrap_or("").trim();
+            if cell.is_empty() {
+                continue;
+            }
+            let v = cell.parse::<f64>().map_err(|_| EvalError::Csv {
+                line: rec.position().map_or(0, |p| p.line()),
+                message: format!("column {c}: `{cell}` is not a number (or inf)"),
+            })?;
+            r.extra.insert(c.to_string(), v);
+        }
+        out.push(r);
+    }
+    Ok(out)
 }
 
 /// Median, minimum and maximum of a set of values (infinities included, as the paper counts
@@ -555,7 +582,7 @@ pub fn cumulative(
             _ => r.key.method.clone(),
         };
         let g = groups.entry(label).or_default();
-        let v = metric.value(&r.metrics);
+        let v = metric.of(r);
         if v.is_finite() {
             g.0.push(v);
         }

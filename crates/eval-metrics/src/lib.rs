@@ -8,6 +8,11 @@
 //!   segment RMSEs. A run that cannot be evaluated is a *failed* result, not an error.
 //! * [`evaluate_batch`], [`summarize`], [`cumulative`], [`summary_table`], and the
 //!   results.csv format ([`write_csv`], [`parse_csv`]) for the paper's tables and plots.
+//! * The field's other trajectory metrics, each exactly as its reference computes it, on
+//!   [`PoseTrack`]s: evo's [`ape`] and [`rpe`] (association [`evo_pairs`], alignment
+//!   [`align_track`] including 4-DoF), the TUM RGB-D scripts' [`tum_ate`] and [`tum_rpe`], the
+//!   KITTI devkit's [`kitti_errors`], with evo's [`ErrorStats`] and result files
+//!   ([`evo_result_entries`]); [`ExtraMetric`] computes them per run of a batch.
 //!
 //! Geometry is [`nalgebra`]'s: positions are `Vector3<f64>`, [`Sim3`] converts to and from
 //! `Similarity3<f64>`, and [`Pose::world_from_camera`] gives an `Isometry3<f64>`. Every
@@ -35,18 +40,36 @@
 //! ```
 #![deny(missing_docs)]
 
+mod align;
+mod ape;
+mod association;
 mod batch;
 mod dataset_truth;
 mod evaluate;
+mod evo_result;
+mod extra;
+mod kitti;
+mod metric;
+mod pose;
+mod pyrandom;
+mod rpe;
 mod sim3;
+mod stats;
 mod table;
 mod trajectory;
+mod tum;
 
 pub use nalgebra;
 
+pub use align::{align_track, align_yaw, AlignMode, AlignOptions, AlignTransform};
+pub use ape::{ape, ApeOptions, ApeResult, PoseRelation};
+pub use association::{
+    evo_pairs, evo_sync, find_closest_index, interpolate, matching_time_indices, slerp,
+    tum_associate, SyncMethod, SyncOptions,
+};
 pub use batch::{
-    cumulative, evaluate_batch, parse_csv, summarize, write_csv, Cumulative, Direction,
-    DirectionFilter, Metric, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+    cumulative, evaluate_batch, evaluate_batch_with, failed_extra, parse_csv, summarize, write_csv,
+    Cumulative, Direction, DirectionFilter, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
 };
 pub use dataset_truth::{
     detect_ground_truth_format, parse_gnss_poses, parse_ground_truth_trajectory, GroundTruthFormat,
@@ -54,12 +77,26 @@ pub use dataset_truth::{
 pub use evaluate::{
     evaluate, Evaluation, FailReason, Metrics, Segment, ASSOCIATION_TOLERANCE, BACKWARDS_EPOCH,
 };
-pub use sim3::{align_sim3, principal_plane, rotation_angle, AlignFailure, Alignment, Sim3};
+pub use evo_result::{evo_result_entries, npy_bytes, EvoResultInfo, NamedArray};
+pub use extra::{batch_track, ExtraMetric, APE_COLUMNS, EXTRA_COLUMNS, KITTI_COLUMNS, RPE_COLUMNS};
+pub use kitti::{kitti_errors, KittiLengthError, KittiResult, KittiSegment, KITTI_LENGTHS};
+pub use metric::Metric;
+pub use pose::{
+    evo_rotation_angle, parse_kitti_poses, quaternion_matrix, rotvec_angle, scipy_quaternion,
+    PoseTrack, Se3,
+};
+pub use pyrandom::PyRandom;
+pub use rpe::{rpe, DeltaUnit, RpeOptions, RpeResult};
+pub use sim3::{
+    align_sim3, principal_plane, rotation_angle, umeyama, AlignFailure, Alignment, Sim3,
+};
+pub use stats::{pairwise_sum, ErrorStats};
 pub use table::{markdown_table, summary_table, TableStyle, TABLE_CAPTION};
 pub use trajectory::{
     detect_format, parse_euroc, parse_kitti, parse_tum, GroundTruth, Pose, Trajectory,
     TrajectoryFormat,
 };
+pub use tum::{tum_ate, tum_rpe, TumAteOptions, TumDeltaUnit, TumResult, TumRpeOptions};
 
 /// Errors for unusable input (a malformed line, an empty or disordered ground truth). A run
 /// that is merely bad (empty, NaN, lost tracking) is not an error: see [`FailReason`].
@@ -133,4 +170,70 @@ pub enum EvalError {
         /// Number of timestamp lines.
         times: usize,
     },
+}
+
+/// Why a trajectory metric (APE, RPE, the KITTI segment errors) could not be computed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MetricError {
+    /// A trajectory without poses.
+    #[error("the {0} has no poses")]
+    Empty(&'static str),
+    /// A pose with a NaN or infinite number.
+    #[error("the {which}'s pose {} (in file order) contains NaN or infinity", index + 1)]
+    NonFinite {
+        /// `reference` or `estimate`.
+        which: &'static str,
+        /// 0-based index of the pose.
+        index: usize,
+    },
+    /// Association by time needs timestamps.
+    #[error("the trajectories have no timestamps to associate (KITTI pose files pair by line)")]
+    Unstamped,
+    /// No pose of one trajectory has a partner in the other.
+    #[error("found no matching timestamps between the reference and the estimate with max. time difference {max_diff} s and time offset {offset} s")]
+    NoMatches {
+        /// The tolerance.
+        max_diff: f64,
+        /// The offset added to the estimate's stamps.
+        offset: f64,
+    },
+    /// Poses paired by line (no timestamps) need as many in both trajectories.
+    #[error("the reference has {reference} poses and the estimate {estimate}; without timestamps poses pair by line and the counts must agree")]
+    LengthMismatch {
+        /// Reference poses.
+        reference: usize,
+        /// Estimated poses.
+        estimate: usize,
+    },
+    /// Interpolation needs two poses.
+    #[error("cannot interpolate a trajectory of {0} pose(s)")]
+    TooFewToInterpolate(usize),
+    /// The alignment failed.
+    #[error("alignment: {0}")]
+    Align(AlignFailure),
+    /// No pose pairs for the relative error.
+    #[error("delta = {delta} ({unit}) produced no pose pairs; try a smaller delta or a looser tolerance")]
+    NoPairs {
+        /// The delta.
+        delta: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
+    /// Too few compared pairs (the TUM scripts need two).
+    #[error("only {0} pose pair(s) could be compared, at least 2 are needed")]
+    TooFewPairs(usize),
+    /// A rotation matrix with a non-positive determinant (a reflection), where an angle is
+    /// needed.
+    #[error("pose {} of the {which} has a rotation matrix with non-positive determinant {det}", index + 1)]
+    NotARotation {
+        /// `reference` or `estimate`.
+        which: &'static str,
+        /// 0-based index of the pose.
+        index: usize,
+        /// The determinant.
+        det: f64,
+    },
+    /// An option value that cannot be used.
+    #[error("{0}")]
+    Option(String),
 }

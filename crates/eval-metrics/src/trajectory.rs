@@ -254,7 +254,8 @@ pub fn parse_euroc(text: &str) -> Result<Trajectory, EvalError> {
         )?;
         check_quaternion(no, line, [v[4], v[5], v[6], v[7]])?;
         poses.push(Pose {
-            t: v[0] * 1e-9,
+            // nanoseconds to seconds as evo does (a division: exact for exact values)
+            t: v[0] / 1e9,
             position: Vector3::new(v[1], v[2], v[3]),
             orientation: Quaternion::new(v[4], v[5], v[6], v[7]),
         });
@@ -291,6 +292,8 @@ pub fn detect_format(text: &str) -> TrajectoryFormat {
 pub struct GroundTruth {
     times: Vec<f64>,
     positions: Vec<Vector3<f64>>,
+    /// Orientations as read (`w, x, y, z`); identity for [`GroundTruth::from_rows`].
+    orientations: Vec<Quaternion<f64>>,
 }
 
 impl GroundTruth {
@@ -299,6 +302,7 @@ impl GroundTruth {
     pub fn parse(text: &str) -> Result<GroundTruth, EvalError> {
         let mut times = Vec::with_capacity(text.len() / 60);
         let mut positions = Vec::with_capacity(text.len() / 60);
+        let mut orientations = Vec::with_capacity(text.len() / 60);
         let mut prev: Option<(usize, f64)> = None;
         for (no, line) in data_lines(text) {
             let v = parse_fields::<8>(no, line, TUM_EXPECTED, false)?;
@@ -322,11 +326,16 @@ impl GroundTruth {
             prev = Some((no, t));
             times.push(t);
             positions.push(Vector3::new(v[1], v[2], v[3]));
+            orientations.push(Quaternion::new(v[7], v[4], v[5], v[6]));
         }
         if times.is_empty() {
             return Err(EvalError::EmptyGroundTruth);
         }
-        Ok(GroundTruth { times, positions })
+        Ok(GroundTruth {
+            times,
+            positions,
+            orientations,
+        })
     }
 
     /// Builds a ground truth from times and positions (NaN positions allowed; times must
@@ -353,7 +362,33 @@ impl GroundTruth {
                 });
             }
         }
-        Ok(GroundTruth { times, positions })
+        let orientations = vec![Quaternion::identity(); times.len()];
+        Ok(GroundTruth {
+            times,
+            positions,
+            orientations,
+        })
+    }
+
+    /// The rows with a finite pose as a stamped track (for APE, RPE and the KITTI segment
+    /// errors); a row with a zero or non-finite quaternion counts as not finite.
+    pub fn track(&self) -> crate::PoseTrack {
+        let ok: Vec<usize> = (0..self.times.len())
+            .filter(|&i| {
+                let q = &self.orientations[i];
+                self.positions[i].iter().all(|v| v.is_finite())
+                    && q.coords.iter().all(|v| v.is_finite())
+                    && q.norm_squared() > 1e-12
+            })
+            .collect();
+        let mut t = crate::PoseTrack {
+            times: Some(ok.iter().map(|&i| self.times[i]).collect()),
+            positions: ok.iter().map(|&i| self.positions[i]).collect(),
+            rotations: Vec::with_capacity(ok.len()),
+            quaternions: ok.iter().map(|&i| self.orientations[i]).collect(),
+        };
+        t.rotations = t.quaternions.iter().map(crate::quaternion_matrix).collect();
+        t
     }
 
     /// Row timestamps.

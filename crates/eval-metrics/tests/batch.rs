@@ -95,6 +95,7 @@ fn csv_round_trips_awkward_fields() {
             ),
             metrics: Metrics::FAILED,
             poses: 0,
+            extra: Default::default(),
         },
         RunRecord {
             key: key("ORB\nSLAM", "seq \"x\", y", 4),
@@ -109,6 +110,7 @@ fn csv_round_trips_awkward_fields() {
                 rmse_end: 2.5e-7,
             },
             poses: 17,
+            extra: Default::default(),
         },
         RunRecord {
             key: key("", " padded ", 1),
@@ -118,6 +120,7 @@ fn csv_round_trips_awkward_fields() {
                 ..Metrics::FAILED
             },
             poses: 3,
+            extra: Default::default(),
         },
     ];
     let text = write_csv(&recs);

@@ -6,4 +6,5 @@ mod batch;
 mod common;
 mod dataset_truth;
 mod metrics;
+mod other_metrics;
 mod parse;

@@ -209,6 +209,9 @@ pub struct Chart {
     pub legend: Option<Corner>,
     /// Only whole numbers on the y axis (counts).
     pub y_integer: bool,
+    /// Names of categories at x = 1, 2, ... (box plots): the x axis labels them and no
+    /// other value; empty for a numeric axis.
+    pub x_categories: Vec<String>,
 }
 
 impl Chart {
@@ -229,6 +232,7 @@ impl Chart {
             equal_aspect: false,
             legend: Some(Corner::TopLeft),
             y_integer: false,
+            x_categories: Vec::new(),
         }
     }
 }
@@ -680,6 +684,22 @@ impl TickFormat {
             t
         }
     }
+}
+
+/// The label of a category axis at `v`: the name at a whole number 1..=n, nothing elsewhere;
+/// `None` for a numeric axis.
+fn category_label(categories: &[String], v: f64) -> Option<String> {
+    if categories.is_empty() {
+        return None;
+    }
+    let k = v.round();
+    Some(
+        if (v - k).abs() < 1e-9 && k >= 1.0 && k <= categories.len() as f64 {
+            categories[k as usize - 1].clone()
+        } else {
+            String::new()
+        },
+    )
 }
 
 fn data_range(series: &[Series], axis: usize, log: bool) -> Option<[f64; 2]> {
@@ -1317,7 +1337,9 @@ where
         .configure_mesh()
         .x_labels(ticks.x)
         .y_labels(ticks.y)
-        .x_label_formatter(&|v| ticks.x_format.format(*v))
+        .x_label_formatter(&|v| {
+            category_label(&c.x_categories, *v).unwrap_or_else(|| ticks.x_format.format(*v))
+        })
         .y_label_formatter(&|v| ticks.y_format.format(*v))
         .x_desc(c.x_label.as_str())
         .y_desc(c.y_label.as_str())

@@ -5,7 +5,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use dataset_io::{scan_ground_truths, scan_results, RunFile};
-use eval_metrics::{evaluate_batch, write_csv, Direction, GroundTruth, RunKey, RunRecord};
+use eval_metrics::{
+    evaluate_batch_with, failed_extra, write_csv, Direction, ExtraMetric, GroundTruth, Metric,
+    RunKey, RunRecord, Stat,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -25,6 +28,9 @@ pub struct BatchOptions {
     pub force: bool,
     /// Record unreadable or malformed run files as failed runs instead of stopping.
     pub keep_going: bool,
+    /// The field's other metrics to compute for every run (APE, RPE, KITTI), as more
+    /// columns of results.csv.
+    pub extra: Vec<ExtraMetric>,
 }
 
 /// An evaluated results tree.
@@ -103,11 +109,12 @@ pub fn evaluate_tree(opts: &BatchOptions, observer: &dyn Observer) -> Result<Bat
         },
         run: r.run,
     };
-    let results = evaluate_batch(
+    let results = evaluate_batch_with(
         &runs,
         key,
         |r| load_trajectory(&r.path, None, None),
         |k| ground_truth.get(&k.sequence),
+        &opts.extra,
         || observer.advance(1),
     );
     observer.finish();
@@ -125,6 +132,7 @@ pub fn evaluate_tree(opts: &BatchOptions, observer: &dyn Observer) -> Result<Bat
                     failure: Some(why),
                     metrics: eval_metrics::Metrics::FAILED,
                     poses: 0,
+                    extra: failed_extra(&opts.extra),
                 });
             }
             Err(e) => {
@@ -148,13 +156,16 @@ pub fn evaluate_tree(opts: &BatchOptions, observer: &dyn Observer) -> Result<Bat
     })
 }
 
-/// Runs and failures of one method.
+/// Runs, failures and statistics of one method.
 #[derive(Debug, Serialize)]
 pub struct MethodCount {
     /// Runs.
     pub runs: usize,
     /// Failed runs.
     pub failed: usize,
+    /// Median, minimum and maximum over the runs of e_align, e_r, e'_s and of every other
+    /// metric computed (failed runs count as infinite; JSON `null`).
+    pub statistics: BTreeMap<&'static str, Stat>,
 }
 
 /// A file of the results tree that was skipped, and why.
@@ -192,11 +203,22 @@ impl Batch {
     pub fn summary(&self) -> BatchSummary {
         let mut methods: BTreeMap<String, MethodCount> = BTreeMap::new();
         for r in &self.records {
-            let e = methods
-                .entry(r.key.method.clone())
-                .or_insert(MethodCount { runs: 0, failed: 0 });
+            let e = methods.entry(r.key.method.clone()).or_insert(MethodCount {
+                runs: 0,
+                failed: 0,
+                statistics: BTreeMap::new(),
+            });
             e.runs += 1;
             e.failed += usize::from(!r.is_ok());
+        }
+        for (m, c) in methods.iter_mut() {
+            let rs: Vec<&RunRecord> = self.records.iter().filter(|r| &r.key.method == m).collect();
+            for metric in computed_metrics(&self.records) {
+                let v: Vec<f64> = rs.iter().map(|r| metric.of(r)).collect();
+                if let Some(st) = Stat::of(&v) {
+                    c.statistics.insert(metric.name(), st);
+                }
+            }
         }
         BatchSummary {
             runs: self.records.len(),
@@ -238,12 +260,51 @@ impl BatchSummary {
             }
         );
         for (m, c) in &self.methods {
-            let _ = writeln!(s, "  {m:<20} {:>6} runs  {:>5} failed", c.runs, c.failed);
+            let _ = write!(s, "  {m:<20} {:>6} runs  {:>5} failed", c.runs, c.failed);
+            // the headline figures; --json has every statistic
+            for name in [
+                "e_align",
+                "e_r",
+                "e_s",
+                "ape_rmse",
+                "rpe_rmse",
+                "kitti_t_err",
+                "kitti_r_err",
+            ] {
+                if let Some(st) = c.statistics.get(name) {
+                    let name = if name == "e_s" { "e'_s" } else { name };
+                    let _ = write!(s, "  {name} {}", fmt_stat(st.median));
+                }
+            }
+            s.push('\n');
+        }
+        if self.methods.values().any(|c| !c.statistics.is_empty()) {
+            s.push_str("  (medians over the runs; failed runs count as infinite)\n");
         }
         if !self.output.is_empty() {
             let _ = writeln!(s, "wrote {}", self.output);
         }
         s
+    }
+}
+
+/// The metrics the records have: e_align, e_r, e'_s, and the other metrics' columns present.
+pub fn computed_metrics(records: &[RunRecord]) -> Vec<Metric> {
+    Metric::ALL
+        .into_iter()
+        .filter(|m| match m {
+            Metric::EAlign | Metric::ER | Metric::ES => true,
+            m if m.is_extra() => records.iter().any(|r| r.extra.contains_key(m.name())),
+            _ => false,
+        })
+        .collect()
+}
+
+fn fmt_stat(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4}")
+    } else {
+        "inf".into()
     }
 }
 

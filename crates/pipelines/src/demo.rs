@@ -58,6 +58,7 @@ pub fn evaluate_benchmark(dir: &Path, observer: &dyn Observer) -> Result<DemoEva
             output: Some(dir.join("results.csv")),
             force: false,
             keep_going: false,
+            extra: Vec::new(),
         },
         observer,
     )?;

@@ -28,12 +28,13 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use dataset_io::OutputDir;
-use eval_metrics::{cumulative, Direction, DirectionFilter, Metric, RunRecord, Stat};
+use eval_metrics::{cumulative, Direction, DirectionFilter, ExtraMetric, Metric, RunRecord, Stat};
 use monovo_figures::{Chart, Corner, Figure, Panel, Series, PALETTE};
 use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
 use crate::batch::{evaluate_tree, BatchOptions};
+use crate::metric_table::MetricTable;
 use crate::paper::{cumulative_range, step_points};
 use crate::{json_number, Observer, PipelineError, Result};
 
@@ -72,6 +73,9 @@ struct ManifestFile {
     methods: Option<Vec<MethodFile>>,
     #[serde(rename = "variation")]
     variations: Option<Vec<Spanned<VariationFile>>>,
+    ape: Option<Spanned<MetricTable>>,
+    rpe: Option<Spanned<MetricTable>>,
+    kitti: Option<Spanned<MetricTable>>,
 }
 
 #[derive(Deserialize)]
@@ -139,6 +143,9 @@ pub struct Experiment {
     pub methods: Vec<ExperimentMethod>,
     /// The variations, in the manifest's order.
     pub variations: Vec<Variation>,
+    /// The field's other metrics computed next to e_align (the `[ape]`, `[rpe]` and
+    /// `[kitti]` tables).
+    pub extra: Vec<ExtraMetric>,
 }
 
 /// 1-based line of a byte offset.
@@ -248,6 +255,34 @@ impl Experiment {
                 line: 1,
             });
         }
+        let mut extra = Vec::new();
+        for (table, which) in [
+            (&file.ape, "ape"),
+            (&file.rpe, "rpe"),
+            (&file.kitti, "kitti"),
+        ] {
+            if let Some(t) = table {
+                let m = match which {
+                    "ape" => t.get_ref().ape(),
+                    "rpe" => t.get_ref().rpe(),
+                    _ => t.get_ref().kitti(),
+                }
+                .map_err(|m| err(at(&t.span()), format!("[{which}]: {m}")))?;
+                extra.push(m);
+            }
+        }
+        for m in metrics.iter().filter(|m| m.is_extra()) {
+            let table = m.name().split('_').next().unwrap_or("");
+            if !extra.iter().any(|x| x.columns().contains(&m.name())) {
+                return Err(err(
+                    None,
+                    format!(
+                        "metric `{}` needs an [{table}] table (evo's options, e.g. align = \"sim3\"); see `monovo experiment --help`",
+                        m.name()
+                    ),
+                ));
+            }
+        }
         Ok(Experiment {
             path: path.to_path_buf(),
             title: file.title.unwrap_or_default(),
@@ -256,6 +291,7 @@ impl Experiment {
             keep_going: file.keep_going.unwrap_or(false),
             methods,
             variations,
+            extra,
         })
     }
 
@@ -367,6 +403,7 @@ pub fn run_experiment(
                 output: None,
                 force: false,
                 keep_going: exp.keep_going,
+                extra: exp.extra.clone(),
             },
             observer,
         )
@@ -446,7 +483,7 @@ pub fn run_experiment(
                 .metrics
                 .iter()
                 .map(|metric| {
-                    let vals: Vec<f64> = rs.iter().map(|r| metric.value(&r.metrics)).collect();
+                    let vals: Vec<f64> = rs.iter().map(|r| metric.of(r)).collect();
                     Stat::of(&vals).map_or(f64::NAN, |s| s.median)
                 })
                 .collect();
@@ -468,6 +505,10 @@ pub fn run_experiment(
     for &metric in &exp.metrics {
         let fig = grouped_figure(exp, &per_variation, metric);
         let name = format!("cumulative_{}.png", metric.name());
+        monovo_figures::save(&fig, &out.path().join(&name))?;
+        figures.push(final_dir.join(name));
+        let fig = grouped_box_figure(exp, &per_variation, metric);
+        let name = format!("box_{}.png", metric.name());
         monovo_figures::save(&fig, &out.path().join(&name))?;
         figures.push(final_dir.join(name));
     }
@@ -671,6 +712,58 @@ pub fn grouped_figure(
     }
 }
 
+/// The box plot of one metric: a panel per variation, a box per method (failed runs left
+/// out), one legend below.
+pub fn grouped_box_figure(
+    exp: &Experiment,
+    per_variation: &[Vec<RunRecord>],
+    metric: Metric,
+) -> Figure {
+    let short = if metric == Metric::ES {
+        "e'_s"
+    } else {
+        metric.name()
+    };
+    let n = exp.variations.len().max(1);
+    let cols = n.min(3);
+    let rows = n.div_ceil(cols);
+    let (pw, ph) = (560u32, 430u32);
+    let panels = exp
+        .variations
+        .iter()
+        .zip(per_variation)
+        .enumerate()
+        .map(|(k, (v, records))| {
+            let groups: Vec<(String, Vec<f64>)> = exp
+                .methods
+                .iter()
+                .map(|m| {
+                    let vals = records
+                        .iter()
+                        .filter(|r| r.key.method == m.name)
+                        .map(|r| metric.of(r))
+                        .collect();
+                    (m.label.clone(), vals)
+                })
+                .collect();
+            let title = if exp.title.is_empty() {
+                format!("{}: {short}", v.label)
+            } else {
+                format!("{}: {}: {short}", exp.title, v.label)
+            };
+            let c = crate::boxplot::box_chart(&title, metric, &groups);
+            let (col, row) = ((k % cols) as f64, (k / cols) as f64);
+            let (fw, fh) = (1.0 / cols as f64, 1.0 / rows as f64);
+            (Panel::Chart(c), [col * fw, row * fh, fw, fh])
+        })
+        .collect();
+    Figure {
+        width: pw * cols as u32,
+        height: ph * rows as u32,
+        panels,
+    }
+}
+
 impl ExperimentReport {
     /// The report as text (`monovo eval-batch --manifest`).
     pub fn text(&self) -> String {
@@ -772,5 +865,23 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("dataset"), "{e}");
+        // the other metrics need their table, whose options are checked
+        let e = parse("dataset = \"d\"\nresults = \"r\"\nmetrics = [\"rpe_rmse\"]\n[[method]]\nname = \"a\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("[rpe]"), "{e}");
+        let e = parse(
+            "dataset = \"d\"\nresults = \"r\"\n[[method]]\nname = \"a\"\n[ape]\nalign = \"sim4\"\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("line 5") && e.contains("sim4") && e.contains("sim3"),
+            "{e}"
+        );
+        let e = parse("dataset = \"d\"\nresults = \"r\"\n[[method]]\nname = \"a\"\n[kitti]\naling = \"se3\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("aling"), "{e}");
     }
 }

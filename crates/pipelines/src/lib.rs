@@ -24,6 +24,7 @@
 #![deny(missing_docs)]
 
 mod batch;
+mod boxplot;
 pub mod calib;
 pub mod camera;
 pub mod demo;
@@ -32,14 +33,20 @@ mod eval;
 pub mod experiment;
 pub mod exposure;
 mod inspect;
+mod metric_args;
+mod metric_figures;
+mod metric_table;
 mod observe;
 pub mod paper;
 pub mod rectify;
 pub mod synth;
+mod traj_metrics;
 
 pub use batch::{
-    evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount, StrayFile,
+    computed_metrics, evaluate_tree, load_results, Batch, BatchOptions, BatchSummary, MethodCount,
+    StrayFile,
 };
+pub use boxplot::{box_chart, method_box_figure, BoxStats};
 pub use camera::{summarize_camera, CameraSummary};
 pub use error::{error_chain, json_number, PipelineError, Result, WithContext};
 pub use eval::{
@@ -48,9 +55,16 @@ pub use eval::{
 };
 pub use experiment::{run_experiment, Experiment, ExperimentReport, Layout};
 pub use inspect::{inspect_sequence, read_vignette, SequenceInfo};
+pub use metric_args::{MetricArgs, RpeUnit, Spelling};
+pub use metric_figures::{kitti_figure, metric_figure, PlotX};
+pub use metric_table::MetricTable;
 pub use monovo_figures as figures;
 pub use observe::{Observer, Silent};
 pub use paper::{cumulative_chart, method_medians, metric_study_figure, MethodMedians};
+pub use traj_metrics::{
+    kitti_pairs, kitti_report, load_track, metric_report, run_kitti, run_metric, save_evo_result,
+    AlignmentReport, KittiReport, MetricReport, PlotData,
+};
 
 /// The README's Rust examples, compiled as doctests of this crate (which depends on every
 /// crate they use).

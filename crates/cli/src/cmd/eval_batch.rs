@@ -21,6 +21,14 @@ are listed and skipped, never mixed in. results.csv has the columns
 method,sequence,direction,run,status,e_align,e_s,e_r,e_t,e_rmse,rmse_start,rmse_end,poses,reason
 (failed runs have status `failed`, `inf` metrics and the reason); feed it to `monovo plot`.
 
+--ape, --rpe and --kitti compute the field's other metrics for every run as well, with the
+flags of `monovo ape`, `monovo rpe` (evo's, or --tum for the TUM RGB-D scripts) and
+`monovo kitti`: more columns in results.csv (ape_rmse, ape_mean, ape_median, ape_std, ape_min,
+ape_max, the same for rpe_, kitti_t_err in %, kitti_r_err in deg/100m; infinite where a metric
+cannot be computed), their per-method medians in the summary, and `monovo plot cumulative
+--metric ape_rmse` / `monovo plot box` draw them. The reference is groundtruthSync.txt's rows
+with a pose; backwards runs' 2e9 - t stamps are mapped back and every estimate is sorted by time.
+
 With --manifest FILE, the experiment the manifest describes is run instead (methods and
 variations, grouped cumulative plots and tables into the folder -o); see `monovo experiment
 --help` for the format.
@@ -28,6 +36,9 @@ variations, grouped cumulative plots and tables into the folder -o); see `monovo
 Example:
   monovo eval-batch --dataset tum-mono --results results -o results.csv
   monovo plot cumulative results.csv -o e_align.png
+  monovo eval-batch --dataset tum-mono --results results -o results.csv --ape \"-as\" \\
+      --rpe \"-as --delta 10 --delta_unit m\" --kitti=-as
+  monovo plot box results.csv --metric ape_rmse -o ape.png
   monovo eval-batch --manifest data/experiment.toml --base synth -o experiment")]
 pub struct Args {
     /// Folder with one SEQUENCE/groundtruthSync.txt per sequence.
@@ -55,6 +66,26 @@ pub struct Args {
     /// Print a JSON summary (runs, failed, per method, stray files) instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Also the APE of every run, with `monovo ape`'s flags (e.g. "-as").
+    #[arg(
+        long,
+        value_name = "FLAGS",
+        allow_hyphen_values = true,
+        conflicts_with = "manifest"
+    )]
+    pub ape: Option<String>,
+    /// Also the RPE of every run, with `monovo rpe`'s flags (e.g. "-as -d 10 -u m").
+    #[arg(
+        long,
+        value_name = "FLAGS",
+        allow_hyphen_values = true,
+        conflicts_with = "manifest"
+    )]
+    pub rpe: Option<String>,
+    /// Also the KITTI segment errors of every run (over its associated poses): --kitti, or
+    /// --kitti=FLAGS with alignment flags (e.g. --kitti=-as; none by default, as the devkit).
+    #[arg(long, value_name = "FLAGS", num_args = 0..=1, require_equals = true, default_missing_value = "", allow_hyphen_values = true, conflicts_with = "manifest")]
+    pub kitti: Option<String>,
 }
 
 /// Runs `monovo eval-batch`.
@@ -71,6 +102,16 @@ pub fn run(args: &Args) -> Result<()> {
     let (Some(dataset), Some(results)) = (&args.dataset, &args.results) else {
         anyhow::bail!("--dataset and --results are needed without --manifest");
     };
+    let mut extra = Vec::new();
+    if let Some(f) = &args.ape {
+        extra.push(crate::cmd::ape::metric_from_flags(f)?);
+    }
+    if let Some(f) = &args.rpe {
+        extra.push(crate::cmd::rpe::metric_from_flags(f)?);
+    }
+    if let Some(f) = &args.kitti {
+        extra.push(crate::cmd::kitti::metric_from_flags(f)?);
+    }
     let batch = evaluate_tree(
         &BatchOptions {
             dataset: dataset.clone(),
@@ -78,6 +119,7 @@ pub fn run(args: &Args) -> Result<()> {
             output: Some(args.output.clone()),
             force: args.force,
             keep_going: args.keep_going,
+            extra,
         },
         &Bars::default(),
     )?;

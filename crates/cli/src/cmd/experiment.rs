@@ -17,7 +17,9 @@ direction, real-time or not, ...). Each variation is a results folder, a filter,
   title = \"synthetic benchmark\"          # figure titles (optional)
   dataset = \"dataset\"                    # SEQUENCE/groundtruthSync.txt
   results = \"results\"                    # METHOD/SEQUENCE/{fwd,bwd}_N.txt
-  metrics = [\"e_align\", \"e_r\", \"e_s\"]    # default; also e_t, e_rmse, rmse_start, rmse_end
+  metrics = [\"e_align\", \"e_r\", \"e_s\"]    # default; also e_t, e_rmse, rmse_start, rmse_end,
+                                         # ape_rmse, ape_mean, ..., rpe_rmse, ..., kitti_t_err,
+                                         # kitti_r_err (with the tables below)
   layout = \"panels\"                      # one panel per variation; \"overlay\": one chart,
                                          # line style per variation
   keep_going = false                     # count unreadable run files as failed runs
@@ -34,9 +36,20 @@ direction, real-time or not, ...). Each variation is a results folder, a filter,
   # dataset = \"dataset_fov90\"            # and its ground truth, if it differs
   # sequences = [\"sequence_01\"]          # only these sequences
 
+  [ape]                                  # APE next to e_align, evo's option names:
+  align = \"sim3\"                         # none, se3, sim3, scale, posyaw, origin
+  # pose_relation, n_to_align, t_max_diff, t_offset, sync_method; tum = true: evaluate_ate.py
+  [rpe]                                  # RPE: also delta, delta_unit (f, m, d, r), delta_tol,
+  align = \"sim3\"                         # all_pairs, pairs_from_reference; tum = true:
+  delta = 1                              # evaluate_rpe.py (delta_unit s, max_pairs, scale)
+  delta_unit = \"m\"
+  [kitti]                                # KITTI segment errors over the associated poses
+  align = \"sim3\"
+
 Paths are relative to the manifest's folder, or to --base DIR. Every results folder is
 evaluated once, in parallel. The output folder -o gets cumulative_METRIC.png per metric
-(runs with error below x against x, log x axis, one colour per method), summary.md and
+(runs with error below x against x, log x axis, one colour per method), box_METRIC.png (a
+box per method and variation, failed runs left out), summary.md and
 summary.csv (runs, failures and medians per variation and method; failed runs count as
 infinite) and results_VARIATION.csv (the variation's runs, as `eval-batch` writes them). A
 bad manifest is an error naming the file, the line and what was expected.

@@ -6,6 +6,7 @@ use anyhow::Result;
 use eval_metrics::{cumulative, summarize, summary_table, DirectionFilter, Metric, TableStyle};
 use monovo_pipelines::load_results as load;
 use monovo_pipelines::paper::{cumulative_chart, cumulative_json, table_json};
+use monovo_pipelines::{method_box_figure, BoxStats};
 
 use crate::plot::{self, Figure};
 
@@ -40,6 +41,36 @@ Examples:
 One row per sequence and method (and direction with --split direction). Failed runs count as
 infinite, so a median of inf means that half the runs or more failed.")]
     Table(TableArgs),
+    /// Box plot of a metric over the runs of each method (failed runs left out).
+    #[command(after_help = "\
+Examples:
+  monovo plot box results.csv -o e_align_box.png
+  monovo plot box results.csv -o ape.png --metric ape_rmse --json
+
+One box per method: the first to the third quartile, the median, whiskers to the most extreme
+values within 1.5 times the box's height and the values beyond as points. The legend gives
+each method's count of runs with a value. --json prints the boxes' numbers.")]
+    Box(BoxArgs),
+}
+
+/// Arguments of `monovo plot box`.
+#[derive(clap::Args, Debug)]
+pub struct BoxArgs {
+    /// results.csv from `monovo eval-batch`.
+    pub results: PathBuf,
+    /// Output image, .png or .svg.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Metric: e_align, e_r, e_s (as e'_s), e_t, e_rmse, rmse_start, rmse_end, and the
+    /// columns of eval-batch --ape/--rpe/--kitti (ape_rmse, rpe_mean, kitti_t_err, ...).
+    #[arg(long, default_value = "e_align")]
+    pub metric: Metric,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+    /// Print one JSON object (per method its box) as well.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Which runs go into the curves.
@@ -66,7 +97,8 @@ pub struct CumulativeArgs {
     /// Output image, .png or .svg.
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
-    /// Metric: e_align, e_r, e_s (as e'_s), e_t, e_rmse, rmse_start, rmse_end.
+    /// Metric: e_align, e_r, e_s (as e'_s), e_t, e_rmse, rmse_start, rmse_end, and the
+    /// columns of eval-batch --ape/--rpe/--kitti (ape_rmse, rpe_mean, kitti_t_err, ...).
     #[arg(long, default_value = "e_align")]
     pub metric: Metric,
     /// Split each method's line by playback direction.
@@ -106,6 +138,23 @@ pub struct TableArgs {
     pub json: bool,
 }
 
+/// Refuses a metric that the results do not have (an `eval-batch` without `--ape`, ...).
+fn require_metric(
+    records: &[eval_metrics::RunRecord],
+    m: Metric,
+    path: &std::path::Path,
+) -> Result<()> {
+    if m.is_extra() && !records.iter().any(|r| r.extra.contains_key(m.name())) {
+        anyhow::bail!(
+            "{}: no column {}; compute it with `monovo eval-batch --{}`",
+            path.display(),
+            m.name(),
+            m.name().split('_').next().unwrap_or("ape")
+        );
+    }
+    Ok(())
+}
+
 /// Runs `monovo plot`.
 pub fn run(args: &Args) -> Result<()> {
     match &args.what {
@@ -113,6 +162,7 @@ pub fn run(args: &Args) -> Result<()> {
             plot::format_of(&a.output)?;
             dataset_io::check_output_file(&a.output, a.force)?;
             let records = load(&a.results)?;
+            require_metric(&records, a.metric, &a.results)?;
             let filter = match (a.split, a.direction) {
                 (Some(Split::Direction), _) => DirectionFilter::Split,
                 (None, Some(Dir::Fwd)) => DirectionFilter::Forward,
@@ -129,6 +179,40 @@ pub fn run(args: &Args) -> Result<()> {
                         "output": a.output.display().to_string(),
                         "metric": a.metric.name(),
                         "lines": cumulative_json(&curves),
+                    })
+                )?;
+            } else {
+                outln!("wrote {}", a.output.display())?;
+            }
+        }
+        What::Box(a) => {
+            plot::format_of(&a.output)?;
+            dataset_io::check_output_file(&a.output, a.force)?;
+            let records = load(&a.results)?;
+            require_metric(&records, a.metric, &a.results)?;
+            plot::save(&method_box_figure(&records, a.metric), &a.output)?;
+            if a.json {
+                let mut methods: Vec<&str> =
+                    records.iter().map(|r| r.key.method.as_str()).collect();
+                methods.sort_unstable();
+                methods.dedup();
+                let boxes: serde_json::Map<String, serde_json::Value> = methods
+                    .iter()
+                    .map(|m| {
+                        let v: Vec<f64> = records
+                            .iter()
+                            .filter(|r| r.key.method == *m)
+                            .map(|r| a.metric.of(r))
+                            .collect();
+                        (m.to_string(), serde_json::json!(BoxStats::of(&v)))
+                    })
+                    .collect();
+                outln!(
+                    "{}",
+                    serde_json::json!({
+                        "output": a.output.display().to_string(),
+                        "metric": a.metric.name(),
+                        "boxes": boxes,
                     })
                 )?;
             } else {
