@@ -34,14 +34,14 @@ mod store;
 use camera_model::{CameraModel, Image, ImageSize};
 use rayon::prelude::*;
 
+use self::outputs::{finish, Solved};
+use self::passes::{pass, store_pass, Step, Visit};
+use self::problem::Problem;
+use self::solver::{solve, Stage, COARSE_STRIDE, COARSE_TOLERANCE};
+use self::store::load;
 use crate::noise::NoiseModel;
 use crate::smoothing::SmoothingChoice;
 use crate::{InverseResponse, PhotometricError};
-use outputs::{finish, Solved};
-use passes::{pass, store_pass, Step, Visit};
-use problem::Problem;
-use solver::{solve, Stage, COARSE_STRIDE, COARSE_TOLERANCE};
-use store::load;
 
 /// A `camera_from_plane` pose: `point_in_camera = r * point_in_plane + t`, the plane being
 /// `z = 0` with the marker the unit square at its origin.

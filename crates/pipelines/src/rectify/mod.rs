@@ -28,10 +28,10 @@ use std::time::Instant;
 use camera_model::{ImageSize, OutputMode, RectifyMap};
 use dataset_io::{PngSpeed, TimeRow};
 
+use self::frames::{FramePipeline, OutFrame};
+use self::input::Input;
+use self::pixels::{Calibration, Pixels};
 use crate::{Observer, PipelineError, Result, WithContext};
-use frames::{FramePipeline, OutFrame};
-use input::Input;
-use pixels::{Calibration, Pixels};
 
 /// What to rectify and how: see [`rectify_sequence`].
 #[derive(Clone, Debug)]
