@@ -369,28 +369,8 @@ pub(super) fn targets(root: &Path) -> Result<Vec<Target>> {
             text: true,
             run: run_results_csv,
         },
-        Target {
-            id: "zip",
-            what: "images.zip",
-            seeds: zips,
-            text: false,
-            run: run_zip,
-        },
-        Target {
-            id: "png",
-            what: "PNG frames and vignettes",
-            seeds: pngs,
-            text: false,
-            run: run_png,
-        },
-        Target {
-            id: "jpeg",
-            what: "JPEG frames",
-            seeds: jpegs,
-            text: false,
-            run: run_jpeg,
-        },
     ]);
+    all.extend(image_targets(pngs, jpegs, zips));
     Ok(all)
 }
 
@@ -546,4 +526,31 @@ fn trajectory_targets(
             run: run_metrics,
         },
     ])
+}
+
+/// The binary targets: images.zip, PNG and JPEG frames.
+fn image_targets(pngs: Vec<Vec<u8>>, jpegs: Vec<Vec<u8>>, zips: Vec<Vec<u8>>) -> Vec<Target> {
+    vec![
+        Target {
+            id: "zip",
+            what: "images.zip",
+            seeds: zips,
+            text: false,
+            run: run_zip,
+        },
+        Target {
+            id: "png",
+            what: "PNG frames and vignettes",
+            seeds: pngs,
+            text: false,
+            run: run_png,
+        },
+        Target {
+            id: "jpeg",
+            what: "JPEG frames",
+            seeds: jpegs,
+            text: false,
+            run: run_jpeg,
+        },
+    ]
 }
