@@ -304,7 +304,7 @@ fn rectify_step(
             rectified.frames as f64 / rectified.seconds.max(1e-9)
         )?;
     }
-    let k = write_frame_previews(&dir)?;
+    let k = write_frame_previews(dir)?;
     let _ = writeln!(
         md,
         "## Rectification\n\nFOV camera (omega {:.3}) at 640x512 to the `crop` pinhole at 640x480: fx={:.3} fy={:.3} cx={:.3} cy={:.3}; \
