@@ -133,7 +133,6 @@ fn check_camera_file(path: &Path) -> CameraCase {
         crop_gain: None,
         failures: Vec::new(),
     };
-    let fail = &mut case.failures;
     match &verdict {
         Verdict::Ok {
             cam,
@@ -141,287 +140,317 @@ fn check_camera_file(path: &Path) -> CameraCase {
             ow,
             oh,
             extra_lines,
-        } => {
-            case.model = match cam.model {
-                dso::Model::Fov(0.0) => "Pinhole",
-                _ => cam.model.name(),
-            };
-            case.mode = match out {
-                dso::Out::Crop => "crop",
-                dso::Out::Full => "full",
-                dso::Out::None => "none",
-                dso::Out::Explicit(_) => "explicit",
-            };
-            case.class = format!("DSO reads: {} {}", case.model, case.mode);
-            let f = match parsed {
-                Ok(f) => f,
-                Err(e) => {
-                    fail.push(format!("DSO reads it, monovo refuses: {e}"));
-                    return case;
-                }
-            };
-            // the same input camera
-            if f.input.name() != case.model {
-                fail.push(format!(
-                    "model {} instead of {}",
-                    f.input.name(),
-                    case.model
-                ));
-            }
-            let k = f.input.intrinsics();
-            for (a, b) in [k.fx, k.fy, k.cx, k.cy].into_iter().zip(cam.k) {
-                if rel(a, b) > 1e-12 {
-                    fail.push(format!("input K {a} instead of DSO's {b}"));
-                }
-            }
-            let want_dist: Vec<f64> = match &cam.model {
-                dso::Model::Pinhole => vec![0.0],
-                dso::Model::Fov(o) if *o == 0.0 => vec![0.0],
-                dso::Model::Fov(o) => vec![o.abs()],
-                dso::Model::RadTan(c)
-                | dso::Model::EquiDistant(c)
-                | dso::Model::KannalaBrandt(c) => c.to_vec(),
-            };
-            if f.input.distortion() != want_dist {
-                fail.push(format!(
-                    "distortion {:?} instead of {want_dist:?}",
-                    f.input.distortion()
-                ));
-            }
-            if (f.input_size.width, f.input_size.height) != (cam.w, cam.h)
-                || (f.output_size.width, f.output_size.height) != (*ow, *oh)
-            {
-                fail.push(format!("sizes {} {} differ", f.input_size, f.output_size));
-            }
-            if f.ignored_lines.len() != *extra_lines {
-                fail.push(format!(
-                    "{} ignored lines listed, DSO ignores {extra_lines}",
-                    f.ignored_lines.len()
-                ));
-            }
-            if mode_name(&f.output) != case.mode {
-                fail.push(format!("output {} instead of {}", f.output, case.mode));
-            }
-            let out_size = ImageSize::new(*ow, *oh);
-            match out {
-                dso::Out::None => {
-                    let mk =
-                        output_intrinsics(&f.input, f.input_size, &f.output, out_size).unwrap();
-                    case.k_diff = [mk.fx, mk.fy, mk.cx, mk.cy]
-                        .iter()
-                        .zip(cam.k)
-                        .map(|(a, b)| rel(*a, b))
-                        .fold(0.0, f64::max);
-                    if case.k_diff != 0.0 {
-                        fail.push(format!("none: K {mk:?} is not the input's {:?}", cam.k));
-                    }
-                    let map =
-                        RectifyMap::for_mode(&f.input, f.input_size, &f.output, out_size).unwrap();
-                    let img = Image::from_fn(cam.w, cam.h, |x, y| ((x * 7 + y * 13) % 256) as u8);
-                    if map.remap_u8(&img).unwrap() != img {
-                        fail.push("none: the raw image does not pass through unchanged".into());
-                    }
-                    let notes = output_notes(&f.input, f.input_size, &f.output, out_size);
-                    if f.input.is_pinhole() != notes.is_empty() {
-                        fail.push(format!("none: notes {notes:?}"));
-                    }
-                }
-                dso::Out::Explicit(v) => {
-                    let dk = dso::output_k(cam, out, *ow, *oh).unwrap();
-                    let mk =
-                        output_intrinsics(&f.input, f.input_size, &f.output, out_size).unwrap();
-                    let relative = v[2] < 1.0 && v[3] < 1.0;
-                    case.k_diff = [mk.fx, mk.fy, mk.cx, mk.cy]
-                        .iter()
-                        .zip(dk)
-                        .map(|(a, b)| rel(*a, b))
-                        .fold(0.0, f64::max);
-                    // DSO multiplies even pixel values by the size; monovo reads them as pixels
-                    if relative && case.k_diff > 1e-12 {
-                        fail.push(format!("explicit K {mk:?} instead of DSO's {dk:?}"));
-                    }
-                    let map =
-                        RectifyMap::for_mode(&f.input, f.input_size, &f.output, out_size).unwrap();
-                    assert!(map.output_size() == out_size);
-                }
-                dso::Out::Crop => {
-                    let dso_rect = dso::crop_rect(cam, *ow, *oh);
-                    let mono = check_crop(&f, Some(cam), out_size, fail);
-                    let fov_omega = match cam.model {
-                        dso::Model::Fov(o) if o != 0.0 => Some(o),
-                        _ => None,
-                    };
-                    match (dso_rect, mono) {
-                        (Some(d), Some(m)) => {
-                            let dk = dso::k_of_rect(d, *ow, *oh);
-                            let dso_invalid = dso::invalid_pixels(cam, dk, *ow, *oh, 0.0);
-                            case.k_diff = dso::k_of_rect(m, *ow, *oh)
-                                .iter()
-                                .zip(dk)
-                                .map(|(a, b)| rel(*a, b))
-                                .fold(0.0, f64::max);
-                            let gain = [
-                                m[0] / d[0] - 1.0,
-                                m[1] / d[1] - 1.0,
-                                m[2] / d[2] - 1.0,
-                                m[3] / d[3] - 1.0,
-                            ];
-                            match fov_omega {
-                                // FOV keeps the authors' closed form (DESIGN.md): the axis
-                                // extents through T(x) = tan(x w) / (2 tan(w / 2)), scaled by
-                                // ow / w. It is up to 0.5 % narrower than DSO's numeric crop
-                                // on the right and bottom (the ow / w scale) and wider on the
-                                // left and top.
-                                Some(omega) => {
-                                    let t =
-                                        |x: f64| (x * omega).tan() / (2.0 * (omega / 2.0).tan());
-                                    let [fx, fy, cx, cy] = cam.k;
-                                    let (w, h) = (cam.w as f64, cam.h as f64);
-                                    let (tl, tr) = (t(cx / fx), t((w - 1.0 - cx) / fx));
-                                    let (tt, tb) = (t(cy / fy), t((h - 1.0 - cy) / fy));
-                                    let kfx = *ow as f64 / w * (w - 1.0) / (tl + tr);
-                                    let kfy = *oh as f64 / h * (h - 1.0) / (tt + tb);
-                                    let closed = [kfx, kfy, tl * kfx, tt * kfy];
-                                    let mk = dso::k_of_rect(m, *ow, *oh);
-                                    let closed_diff = mk
-                                        .iter()
-                                        .zip(closed)
-                                        .map(|(a, b)| rel(*a, b))
-                                        .fold(0.0, f64::max);
-                                    if closed_diff > 1e-9 {
-                                        fail.push(format!(
-                                            "FOV crop {mk:?} is not the closed form {closed:?}"
-                                        ));
-                                    }
-                                    if gain.iter().any(|g| *g < -0.005) {
-                                        fail.push(format!(
-                                            "FOV crop far narrower than DSO's: {gain:?}"
-                                        ));
-                                    }
-                                }
-                                // DSO's crop is itself valid: monovo's must contain it
-                                None if dso_invalid == 0 => {
-                                    if gain.iter().any(|g| *g < -1e-6) {
-                                        fail.push(format!(
-                                            "crop view smaller than DSO's: gains {gain:?} (monovo {m:?}, DSO {d:?})"
-                                        ));
-                                    }
-                                }
-                                // DSO's crop reaches past the fold of the distortion or out of
-                                // the image: no valid crop can contain it
-                                None => case.class.push_str(&format!(
-                                    " (DSO's own crop has {dso_invalid} invalid pixels)"
-                                )),
-                            }
-                            case.crop_gain = Some(gain);
-                        }
-                        (None, Some(_)) => {
-                            // monovo's valid crop was checked above; DSO gives up
-                            case.class = format!(
-                                "DSO exit(1): crop search fails after 500 rounds, {} {}",
-                                case.model, case.mode
-                            );
-                        }
-                        (_, None) => {}
-                    }
-                }
-                dso::Out::Full => unreachable!("DSO aborts on full"),
-            }
-        }
-        Verdict::Exit { line, why } => {
-            case.class = format!("DSO exit(1), line {line}: {why}");
-            if why.starts_with("rectification mode none") {
-                // monovo resizes (DESIGN.md), with a note that DSO refuses
-                match parsed {
-                    Ok(f) => {
-                        let notes = output_notes(&f.input, f.input_size, &f.output, f.output_size);
-                        if !notes.iter().any(|n| n.contains("DSO refuses")) {
-                            fail.push(format!("none with another size: notes {notes:?}"));
-                        }
-                        let map =
-                            RectifyMap::for_mode(&f.input, f.input_size, &f.output, f.output_size)
-                                .unwrap();
-                        if map.invalid_count() != 0 {
-                            fail.push("resized none has invalid pixels".into());
-                        }
-                    }
-                    Err(e) => fail.push(format!("none with another size refused: {e}")),
-                }
-            } else {
-                match parsed {
-                    Ok(f) => fail.push(format!("DSO refuses (line {line}), monovo reads {f:?}")),
-                    Err(e) if error_line(&e) != Some(*line) => {
-                        fail.push(format!("refused at another line than DSO's {line}: {e}"))
-                    }
-                    Err(_) => {}
-                }
-            }
-        }
-        Verdict::Abort { why } => {
-            case.class = format!("DSO aborts: {why}");
-            case.mode = "full";
-            match parsed {
-                Ok(f) => {
-                    case.model = f.input.name();
-                    let out = f.output_size;
-                    let crop = check_crop(&f, None, out, fail);
-                    match output_intrinsics(&f.input, f.input_size, &OutputMode::Full, out) {
-                        Ok(k) => {
-                            let full =
-                                dso::rect_of_k([k.fx, k.fy, k.cx, k.cy], out.width, out.height);
-                            if let Some(c) = crop {
-                                let smaller = full[0] > c[0]
-                                    || full[1] < c[1]
-                                    || full[2] > c[2]
-                                    || full[3] < c[3];
-                                if smaller {
-                                    fail.push(format!("full {full:?} does not contain crop {c:?}"));
-                                }
-                            }
-                        }
-                        Err(e @ CameraError::FullUnbounded { .. }) => {
-                            case.class.push_str(&format!("; monovo refuses full: {e}"));
-                        }
-                        Err(e) => fail.push(format!("full: unexpected error {e}")),
-                    }
-                }
-                Err(e) => fail.push(format!("full file refused: {e}")),
-            }
-        }
-        Verdict::Crash { line, why } => {
-            case.class = format!("DSO crash/UB, line {line}: {why}");
-            match (line, parsed) {
-                // 9+ numbers on a RadTan line: zero extras are a zero k3
-                (1, Ok(f)) => {
-                    case.model = f.input.name();
-                    if f.warnings.is_empty() {
-                        fail.push("extra numbers read without a warning".into());
-                    }
-                    check_crop(&f, None, f.output_size, fail);
-                }
-                (1, Err(e)) => {
-                    let extra_nonzero = text.lines().next().is_some_and(|l| {
-                        l.split_whitespace().skip(8).any(|t| {
-                            t.parse::<f64>().is_ok_and(|v| v != 0.0) || t.parse::<f64>().is_err()
-                        })
-                    });
-                    if !extra_nonzero || error_line(&e) != Some(1) {
-                        fail.push(format!("refused although the extra numbers are 0: {e}"));
-                    }
-                }
-                // CRLF keyword, a 2-line file: monovo reads crop
-                (3, Ok(f)) => {
-                    if f.output != OutputMode::Crop {
-                        fail.push(format!("line 3 read as {}", f.output));
-                    }
-                    check_crop(&f, None, f.output_size, fail);
-                }
-                (l, Err(e)) if error_line(&e) == Some(*l) => {}
-                (_, r) => fail.push(format!("DSO fails at line {line}; monovo gives {r:?}")),
-            }
-        }
+        } => check_dso_read(&mut case, cam, out, (*ow, *oh), *extra_lines, parsed),
+        Verdict::Exit { line, why } => check_dso_exit(&mut case, *line, why, parsed),
+        Verdict::Abort { why } => check_dso_abort(&mut case, why, parsed),
+        Verdict::Crash { line, why } => check_dso_crash(&mut case, *line, why, parsed, &text),
     }
     case
+}
+
+/// DSO reads the file: monovo reads the same camera, sizes and output, and its output
+/// camera is DSO's (or, for `crop`, at least as wide and valid).
+fn check_dso_read(
+    case: &mut CameraCase,
+    cam: &dso::Cam,
+    out: &dso::Out,
+    (ow, oh): (usize, usize),
+    extra_lines: usize,
+    parsed: Result<CameraFile, CameraError>,
+) {
+    let fail = &mut case.failures;
+    case.model = match cam.model {
+        dso::Model::Fov(0.0) => "Pinhole",
+        _ => cam.model.name(),
+    };
+    case.mode = match out {
+        dso::Out::Crop => "crop",
+        dso::Out::Full => "full",
+        dso::Out::None => "none",
+        dso::Out::Explicit(_) => "explicit",
+    };
+    case.class = format!("DSO reads: {} {}", case.model, case.mode);
+    let f = match parsed {
+        Ok(f) => f,
+        Err(e) => {
+            fail.push(format!("DSO reads it, monovo refuses: {e}"));
+            return;
+        }
+    };
+    // the same input camera
+    if f.input.name() != case.model {
+        fail.push(format!(
+            "model {} instead of {}",
+            f.input.name(),
+            case.model
+        ));
+    }
+    let k = f.input.intrinsics();
+    for (a, b) in [k.fx, k.fy, k.cx, k.cy].into_iter().zip(cam.k) {
+        if rel(a, b) > 1e-12 {
+            fail.push(format!("input K {a} instead of DSO's {b}"));
+        }
+    }
+    let want_dist: Vec<f64> = match &cam.model {
+        dso::Model::Pinhole => vec![0.0],
+        dso::Model::Fov(o) if *o == 0.0 => vec![0.0],
+        dso::Model::Fov(o) => vec![o.abs()],
+        dso::Model::RadTan(c) | dso::Model::EquiDistant(c) | dso::Model::KannalaBrandt(c) => {
+            c.to_vec()
+        }
+    };
+    if f.input.distortion() != want_dist {
+        fail.push(format!(
+            "distortion {:?} instead of {want_dist:?}",
+            f.input.distortion()
+        ));
+    }
+    if (f.input_size.width, f.input_size.height) != (cam.w, cam.h)
+        || (f.output_size.width, f.output_size.height) != (ow, oh)
+    {
+        fail.push(format!("sizes {} {} differ", f.input_size, f.output_size));
+    }
+    if f.ignored_lines.len() != extra_lines {
+        fail.push(format!(
+            "{} ignored lines listed, DSO ignores {extra_lines}",
+            f.ignored_lines.len()
+        ));
+    }
+    if mode_name(&f.output) != case.mode {
+        fail.push(format!("output {} instead of {}", f.output, case.mode));
+    }
+    let out_size = ImageSize::new(ow, oh);
+    match out {
+        dso::Out::None => {
+            let mk = output_intrinsics(&f.input, f.input_size, &f.output, out_size).unwrap();
+            case.k_diff = [mk.fx, mk.fy, mk.cx, mk.cy]
+                .iter()
+                .zip(cam.k)
+                .map(|(a, b)| rel(*a, b))
+                .fold(0.0, f64::max);
+            if case.k_diff != 0.0 {
+                fail.push(format!("none: K {mk:?} is not the input's {:?}", cam.k));
+            }
+            let map = RectifyMap::for_mode(&f.input, f.input_size, &f.output, out_size).unwrap();
+            let img = Image::from_fn(cam.w, cam.h, |x, y| ((x * 7 + y * 13) % 256) as u8);
+            if map.remap_u8(&img).unwrap() != img {
+                fail.push("none: the raw image does not pass through unchanged".into());
+            }
+            let notes = output_notes(&f.input, f.input_size, &f.output, out_size);
+            if f.input.is_pinhole() != notes.is_empty() {
+                fail.push(format!("none: notes {notes:?}"));
+            }
+        }
+        dso::Out::Explicit(v) => {
+            let dk = dso::output_k(cam, out, ow, oh).unwrap();
+            let mk = output_intrinsics(&f.input, f.input_size, &f.output, out_size).unwrap();
+            let relative = v[2] < 1.0 && v[3] < 1.0;
+            case.k_diff = [mk.fx, mk.fy, mk.cx, mk.cy]
+                .iter()
+                .zip(dk)
+                .map(|(a, b)| rel(*a, b))
+                .fold(0.0, f64::max);
+            // DSO multiplies even pixel values by the size; monovo reads them as pixels
+            if relative && case.k_diff > 1e-12 {
+                fail.push(format!("explicit K {mk:?} instead of DSO's {dk:?}"));
+            }
+            let map = RectifyMap::for_mode(&f.input, f.input_size, &f.output, out_size).unwrap();
+            assert!(map.output_size() == out_size);
+        }
+        dso::Out::Crop => {
+            check_dso_crop(case, &f, cam, (ow, oh));
+        }
+        dso::Out::Full => unreachable!("DSO aborts on full"),
+    }
+}
+
+/// `crop`: monovo's crop is valid, the authors' closed form for FOV, and otherwise contains
+/// DSO's crop where DSO's own is valid.
+fn check_dso_crop(case: &mut CameraCase, f: &CameraFile, cam: &dso::Cam, (ow, oh): (usize, usize)) {
+    let fail = &mut case.failures;
+    let dso_rect = dso::crop_rect(cam, ow, oh);
+    let mono = check_crop(f, Some(cam), ImageSize::new(ow, oh), fail);
+    let fov_omega = match cam.model {
+        dso::Model::Fov(o) if o != 0.0 => Some(o),
+        _ => None,
+    };
+    match (dso_rect, mono) {
+        (Some(d), Some(m)) => {
+            let dk = dso::k_of_rect(d, ow, oh);
+            let dso_invalid = dso::invalid_pixels(cam, dk, ow, oh, 0.0);
+            case.k_diff = dso::k_of_rect(m, ow, oh)
+                .iter()
+                .zip(dk)
+                .map(|(a, b)| rel(*a, b))
+                .fold(0.0, f64::max);
+            let gain = [
+                m[0] / d[0] - 1.0,
+                m[1] / d[1] - 1.0,
+                m[2] / d[2] - 1.0,
+                m[3] / d[3] - 1.0,
+            ];
+            match fov_omega {
+                // FOV keeps the authors' closed form (DESIGN.md): the axis
+                // extents through T(x) = tan(x w) / (2 tan(w / 2)), scaled by
+                // ow / w. It is up to 0.5 % narrower than DSO's numeric crop
+                // on the right and bottom (the ow / w scale) and wider on the
+                // left and top.
+                Some(omega) => {
+                    let t = |x: f64| (x * omega).tan() / (2.0 * (omega / 2.0).tan());
+                    let [fx, fy, cx, cy] = cam.k;
+                    let (w, h) = (cam.w as f64, cam.h as f64);
+                    let (tl, tr) = (t(cx / fx), t((w - 1.0 - cx) / fx));
+                    let (tt, tb) = (t(cy / fy), t((h - 1.0 - cy) / fy));
+                    let kfx = ow as f64 / w * (w - 1.0) / (tl + tr);
+                    let kfy = oh as f64 / h * (h - 1.0) / (tt + tb);
+                    let closed = [kfx, kfy, tl * kfx, tt * kfy];
+                    let mk = dso::k_of_rect(m, ow, oh);
+                    let closed_diff = mk
+                        .iter()
+                        .zip(closed)
+                        .map(|(a, b)| rel(*a, b))
+                        .fold(0.0, f64::max);
+                    if closed_diff > 1e-9 {
+                        fail.push(format!("FOV crop {mk:?} is not the closed form {closed:?}"));
+                    }
+                    if gain.iter().any(|g| *g < -0.005) {
+                        fail.push(format!("FOV crop far narrower than DSO's: {gain:?}"));
+                    }
+                }
+                // DSO's crop is itself valid: monovo's must contain it
+                None if dso_invalid == 0 => {
+                    if gain.iter().any(|g| *g < -1e-6) {
+                        fail.push(format!(
+                            "crop view smaller than DSO's: gains {gain:?} (monovo {m:?}, DSO {d:?})"
+                        ));
+                    }
+                }
+                // DSO's crop reaches past the fold of the distortion or out of
+                // the image: no valid crop can contain it
+                None => case.class.push_str(&format!(
+                    " (DSO's own crop has {dso_invalid} invalid pixels)"
+                )),
+            }
+            case.crop_gain = Some(gain);
+        }
+        (None, Some(_)) => {
+            // monovo's valid crop was checked above; DSO gives up
+            case.class = format!(
+                "DSO exit(1): crop search fails after 500 rounds, {} {}",
+                case.model, case.mode
+            );
+        }
+        (_, None) => {}
+    }
+}
+
+/// DSO exits: monovo refuses at the same line, or resizes `none` with a note.
+fn check_dso_exit(
+    case: &mut CameraCase,
+    line: usize,
+    why: &str,
+    parsed: Result<CameraFile, CameraError>,
+) {
+    let fail = &mut case.failures;
+    case.class = format!("DSO exit(1), line {line}: {why}");
+    if why.starts_with("rectification mode none") {
+        // monovo resizes (DESIGN.md), with a note that DSO refuses
+        match parsed {
+            Ok(f) => {
+                let notes = output_notes(&f.input, f.input_size, &f.output, f.output_size);
+                if !notes.iter().any(|n| n.contains("DSO refuses")) {
+                    fail.push(format!("none with another size: notes {notes:?}"));
+                }
+                let map =
+                    RectifyMap::for_mode(&f.input, f.input_size, &f.output, f.output_size).unwrap();
+                if map.invalid_count() != 0 {
+                    fail.push("resized none has invalid pixels".into());
+                }
+            }
+            Err(e) => fail.push(format!("none with another size refused: {e}")),
+        }
+    } else {
+        match parsed {
+            Ok(f) => fail.push(format!("DSO refuses (line {line}), monovo reads {f:?}")),
+            Err(e) if error_line(&e) != Some(line) => {
+                fail.push(format!("refused at another line than DSO's {line}: {e}"))
+            }
+            Err(_) => {}
+        }
+    }
+}
+
+/// DSO aborts on `full`: monovo's full view contains its crop, or is refused as unbounded.
+fn check_dso_abort(case: &mut CameraCase, why: &str, parsed: Result<CameraFile, CameraError>) {
+    let fail = &mut case.failures;
+    case.class = format!("DSO aborts: {why}");
+    case.mode = "full";
+    match parsed {
+        Ok(f) => {
+            case.model = f.input.name();
+            let out = f.output_size;
+            let crop = check_crop(&f, None, out, fail);
+            match output_intrinsics(&f.input, f.input_size, &OutputMode::Full, out) {
+                Ok(k) => {
+                    let full = dso::rect_of_k([k.fx, k.fy, k.cx, k.cy], out.width, out.height);
+                    if let Some(c) = crop {
+                        let smaller =
+                            full[0] > c[0] || full[1] < c[1] || full[2] > c[2] || full[3] < c[3];
+                        if smaller {
+                            fail.push(format!("full {full:?} does not contain crop {c:?}"));
+                        }
+                    }
+                }
+                Err(e @ CameraError::FullUnbounded { .. }) => {
+                    case.class.push_str(&format!("; monovo refuses full: {e}"));
+                }
+                Err(e) => fail.push(format!("full: unexpected error {e}")),
+            }
+        }
+        Err(e) => fail.push(format!("full file refused: {e}")),
+    }
+}
+
+/// DSO crashes or is undefined: monovo reads what can be read, with a warning, or refuses at
+/// the same line.
+fn check_dso_crash(
+    case: &mut CameraCase,
+    line: usize,
+    why: &str,
+    parsed: Result<CameraFile, CameraError>,
+    text: &str,
+) {
+    let fail = &mut case.failures;
+    case.class = format!("DSO crash/UB, line {line}: {why}");
+    match (line, parsed) {
+        // 9+ numbers on a RadTan line: zero extras are a zero k3
+        (1, Ok(f)) => {
+            case.model = f.input.name();
+            if f.warnings.is_empty() {
+                fail.push("extra numbers read without a warning".into());
+            }
+            check_crop(&f, None, f.output_size, fail);
+        }
+        (1, Err(e)) => {
+            let extra_nonzero = text.lines().next().is_some_and(|l| {
+                l.split_whitespace()
+                    .skip(8)
+                    .any(|t| t.parse::<f64>().is_ok_and(|v| v != 0.0) || t.parse::<f64>().is_err())
+            });
+            if !extra_nonzero || error_line(&e) != Some(1) {
+                fail.push(format!("refused although the extra numbers are 0: {e}"));
+            }
+        }
+        // CRLF keyword, a 2-line file: monovo reads crop
+        (3, Ok(f)) => {
+            if f.output != OutputMode::Crop {
+                fail.push(format!("line 3 read as {}", f.output));
+            }
+            check_crop(&f, None, f.output_size, fail);
+        }
+        (l, Err(e)) if error_line(&e) == Some(l) => {}
+        (_, r) => fail.push(format!("DSO fails at line {line}; monovo gives {r:?}")),
+    }
 }
 
 /// All camera files: DSO's verdict by the reference, monovo's reading checked against it.

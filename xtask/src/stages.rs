@@ -1,4 +1,6 @@
-//! The stages of bench-synthetic, each on data with known truth.
+//! The stages of bench-synthetic, each on data with known truth (the response and vignette
+//! stages are modules of their own), and the measurements they share: peak memory, median
+//! times.
 
 use std::time::Instant;
 
@@ -70,37 +72,12 @@ pub fn median_ms(n: usize, mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
-/// Runs every stage.
-pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
-    type Stage = fn(bool) -> Result<Vec<Figure>>;
-    let stages: [(&str, Stage); 6] = [
-        ("camera", camera),
-        ("eval", eval),
-        ("rectify", rectify),
-        ("response", crate::response::stage),
-        ("vignette", crate::vignette::stage),
-        ("demo", demo),
-    ];
-    if let Some(o) = only {
-        if !stages.iter().any(|(n, _)| *n == o) {
-            anyhow::bail!("unknown stage `{o}`");
-        }
-    }
-    let mut figures = Vec::new();
-    for (name, stage) in stages {
-        if only.is_none_or(|o| o == name) {
-            figures.extend(stage(quick)?);
-        }
-    }
-    Ok(figures)
-}
-
 const DATASET_CAMERA: &str = "0.535719308086809 0.669566858850269 0.493248545285398 0.500408664348414 0.897966326944875\n1280 1024\ncrop\n640 480\n";
 
 /// Demo stage (full runs and `--only demo`; the CI runs the demo itself after the quick
 /// benchmark): the README's main job, `monovo demo`, as a user runs it, from start to end,
 /// with the release binary built first.
-fn demo(quick: bool) -> Result<Vec<Figure>> {
+pub fn demo(quick: bool) -> Result<Vec<Figure>> {
     if quick {
         return Ok(Vec::new());
     }
@@ -128,7 +105,7 @@ fn demo(quick: bool) -> Result<Vec<Figure>> {
 }
 
 /// Camera stage: output K against DESIGN.md's reference numbers, map build and remap speed.
-fn camera(quick: bool) -> Result<Vec<Figure>> {
+pub fn camera(quick: bool) -> Result<Vec<Figure>> {
     println!("stage camera: FOV 1280x1024 -> pinhole 640x480");
     let file = CameraFile::parse(DATASET_CAMERA)?;
     let out = ImageSize::new(640, 480);
@@ -163,7 +140,7 @@ fn camera(quick: bool) -> Result<Vec<Figure>> {
 
 /// Evaluation stage: exactness on known drift, one 10,000-pose run, and a batch of runs
 /// (2 methods x sequences x 2 directions x 5 runs) parsed and evaluated in parallel.
-fn eval(quick: bool) -> Result<Vec<Figure>> {
+pub fn eval(quick: bool) -> Result<Vec<Figure>> {
     use eval_metrics::{evaluate, parse_tum, GroundTruth};
     use rayon::prelude::*;
     use synthetic::results::{default_methods, run_text, sequence_path};
@@ -283,7 +260,7 @@ fn fps_with_threads(threads: usize, frames: usize, f: impl Fn(usize) + Sync) -> 
 /// Rectification stage on a synthetic 1280x1024 JPEG (q90) sequence to 640x480: decoding
 /// alone, decoding + rectification + photometric correction (writing excluded), and PNG
 /// encoding, with one and two threads; and the correction's accuracy on noise-free frames.
-fn rectify(quick: bool) -> Result<Vec<Figure>> {
+pub fn rectify(quick: bool) -> Result<Vec<Figure>> {
     use photometric::{Correction, InverseResponse, Vignette};
     use synthetic::scene::{SequenceConfig, SyntheticSequence};
     println!(

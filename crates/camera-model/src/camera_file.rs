@@ -626,8 +626,28 @@ fn parse_model_line(
         });
     }
     let k = intrinsics_from_file_values([nums[0], nums[1], nums[2], nums[3]], size);
+    let model = model_of(name, k, nums, line, notes)?;
+    if let Some(message) = model.parameter_problem() {
+        return Err(CameraError::InvalidValue { line, message });
+    }
+    if matches!(name, "DoubleSphere" | "EUCM" | "Omni") {
+        notes.push(format!(
+            "line {line}: `{name}` is monovo's extension of camera.txt; DSO cannot read it"
+        ));
+    }
+    Ok(model)
+}
+
+/// The model `name` with intrinsics `k` and the parameters `nums[4..]` of line `line`.
+fn model_of(
+    name: &str,
+    k: Intrinsics,
+    nums: &[f64],
+    line: usize,
+    notes: &mut Vec<String>,
+) -> Result<CameraModel, CameraError> {
     let p = |i: usize| nums[i];
-    let model = match name {
+    Ok(match name {
         "FOV" => {
             let mut omega = p(4);
             if omega < 0.0 {
@@ -685,14 +705,5 @@ fn parse_model_line(
             k,
             coeffs: [p(4), p(5), p(6), p(7)],
         },
-    };
-    if let Some(message) = model.parameter_problem() {
-        return Err(CameraError::InvalidValue { line, message });
-    }
-    if matches!(name, "DoubleSphere" | "EUCM" | "Omni") {
-        notes.push(format!(
-            "line {line}: `{name}` is monovo's extension of camera.txt; DSO cannot read it"
-        ));
-    }
-    Ok(model)
+    })
 }

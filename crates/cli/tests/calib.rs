@@ -130,6 +130,12 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("does not exist"), "{}", stderr(&o));
 
+    bad_sweeps_are_refused(&d, &sweep);
+}
+
+/// A sweep whose frames share one exposure, and one without exposures: a clear error and
+/// no output.
+fn bad_sweeps_are_refused(d: &std::path::Path, sweep: &std::path::Path) {
     // all frames at one exposure: a clear error and no output
     let same = d.join("same");
     std::fs::create_dir_all(&same).unwrap();

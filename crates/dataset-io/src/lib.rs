@@ -28,6 +28,7 @@
 
 mod atomic;
 mod error;
+mod jpeg;
 mod layouts;
 mod ordered;
 mod outdir;
@@ -36,13 +37,12 @@ mod results;
 mod sequence;
 mod temporaries;
 mod times;
-#[cfg(feature = "turbojpeg")]
-mod turbo;
 mod writer;
 mod zipimages;
 
 pub use atomic::{check_output_file, read_text, scratch_file, write_atomic, write_atomic_with};
 pub use error::DatasetError;
+pub use jpeg::{decode_jpeg_gray8_half, HALF_DECODE, JPEG_DECODER};
 pub use layouts::{parse_data_csv, parse_exposure_csv, parse_rgb_list, Layout};
 pub use outdir::OutputDir;
 pub use png::{
@@ -51,8 +51,8 @@ pub use png::{
 };
 pub use results::{parse_run_name, scan_ground_truths, scan_results, ResultsTree, RunFile};
 pub use sequence::{
-    decode_gray, decode_gray16, decode_gray8, decode_gray_map, decode_jpeg_gray8_half, read_gray16,
-    read_gray8, read_gray_map, Frame, GrayImage, NativeFrame, Sequence, HALF_DECODE, JPEG_DECODER,
+    decode_gray, decode_gray16, decode_gray8, decode_gray_map, read_gray16, read_gray8,
+    read_gray_map, Frame, GrayImage, NativeFrame, Sequence,
 };
 pub use temporaries::{
     in_flight as temporaries_in_flight, remove_all_and_block as remove_temporaries_and_block,

@@ -52,6 +52,7 @@ mod kitti;
 mod metric;
 mod pose;
 mod pyrandom;
+mod record;
 mod rpe;
 mod sim3;
 mod stats;
@@ -69,7 +70,7 @@ pub use association::{
 };
 pub use batch::{
     cumulative, evaluate_batch, evaluate_batch_with, failed_extra, parse_csv, summarize, write_csv,
-    Cumulative, Direction, DirectionFilter, RunKey, RunRecord, SequenceSummary, Stat, CSV_HEADER,
+    Cumulative, DirectionFilter, SequenceSummary, Stat, CSV_HEADER,
 };
 pub use dataset_truth::{
     detect_ground_truth_format, parse_gnss_poses, parse_ground_truth_trajectory, GroundTruthFormat,
@@ -86,6 +87,7 @@ pub use pose::{
     PoseTrack, Se3,
 };
 pub use pyrandom::PyRandom;
+pub use record::{Direction, RunKey, RunRecord};
 pub use rpe::{rpe, DeltaUnit, RpeOptions, RpeResult};
 pub use sim3::{
     align_sim3, principal_plane, rotation_angle, umeyama, AlignFailure, Alignment, Sim3,

@@ -6,8 +6,8 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::batch::RunRecord;
 use crate::evaluate::Metrics;
+use crate::record::RunRecord;
 
 /// A metric to summarise or plot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

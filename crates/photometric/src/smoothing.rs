@@ -199,19 +199,7 @@ fn local_linear_many(
 ) -> Vec<(Vec<f64>, Vec<f64>)> {
     let n = w * h;
     if r == 0 {
-        return maps
-            .iter()
-            .map(|&(v, variance)| {
-                let var = if variance {
-                    (0..n)
-                        .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
-                        .collect()
-                } else {
-                    Vec::new()
-                };
-                (v.to_vec(), var)
-            })
-            .collect();
+        return unsmoothed(maps, wt, n);
     }
     let s = (w.max(h) as f64) / 2.0;
     let xs = |i: usize| ((i % w) as f64 - w as f64 / 2.0) / s;
@@ -219,26 +207,7 @@ fn local_linear_many(
     // (the same coordinates by column and by row, for the moment images)
     let xcol: Vec<f64> = (0..w).map(xs).collect();
     let yrow: Vec<f64> = (0..h).map(|y| ys(y * w)).collect();
-    // each map's weights (0 where it is missing), and the group of maps with the same
-    let mut groups: Vec<(Vec<f64>, bool)> = Vec::new();
-    let mut group_of = Vec::with_capacity(maps.len());
-    for &(v, variance) in maps {
-        let wv: Vec<f64> = (0..n)
-            .map(|i| if v[i].is_finite() { wt[i] } else { 0.0 })
-            .collect();
-        let same =
-            |g: &(Vec<f64>, bool)| g.0.iter().zip(&wv).all(|(a, b)| a.to_bits() == b.to_bits());
-        match groups.iter().position(same) {
-            Some(k) => {
-                groups[k].1 |= variance;
-                group_of.push(k);
-            }
-            None => {
-                groups.push((wv, variance));
-                group_of.push(groups.len() - 1);
-            }
-        }
-    }
+    let (groups, group_of) = weight_groups(maps, wt, n);
     // for the variance: the weights' moments with the squared kernel, a kernel of
     // sigma / sqrt 2 scaled by 1 / (4 pi sigma^2) relative to a unit-sum kernel
     let r2 = radius_for_sigma(sigma_of_radius(r) / 2f64.sqrt()).max(1);
@@ -368,6 +337,52 @@ fn local_linear_many(
             }
         })
         .collect()
+}
+
+/// [`local_linear_many`] at radius 0: the maps as they are, each variance `1 / weight`.
+fn unsmoothed(maps: &[(&[f64], bool)], wt: &[f64], n: usize) -> Vec<(Vec<f64>, Vec<f64>)> {
+    maps.iter()
+        .map(|&(v, variance)| {
+            let var = if variance {
+                (0..n)
+                    .map(|i| if wt[i] > 0.0 { 1.0 / wt[i] } else { f64::NAN })
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            (v.to_vec(), var)
+        })
+        .collect()
+}
+
+/// Each map's weights (0 where it is missing), grouped: maps with the same weights share a
+/// group (whose flag says whether any of them needs its variance), and the group of each map.
+#[allow(clippy::type_complexity)]
+fn weight_groups(
+    maps: &[(&[f64], bool)],
+    wt: &[f64],
+    n: usize,
+) -> (Vec<(Vec<f64>, bool)>, Vec<usize>) {
+    let mut groups: Vec<(Vec<f64>, bool)> = Vec::new();
+    let mut group_of = Vec::with_capacity(maps.len());
+    for &(v, variance) in maps {
+        let wv: Vec<f64> = (0..n)
+            .map(|i| if v[i].is_finite() { wt[i] } else { 0.0 })
+            .collect();
+        let same =
+            |g: &(Vec<f64>, bool)| g.0.iter().zip(&wv).all(|(a, b)| a.to_bits() == b.to_bits());
+        match groups.iter().position(same) {
+            Some(k) => {
+                groups[k].1 |= variance;
+                group_of.push(k);
+            }
+            None => {
+                groups.push((wv, variance));
+                group_of.push(groups.len() - 1);
+            }
+        }
+    }
+    (groups, group_of)
 }
 
 /// Side of the neighbourhood of [`find_defects`].
@@ -541,69 +556,10 @@ pub(crate) fn choose_smoothing(
     let mut scores = Vec::new();
     let (radius, cross_validated) = match fixed {
         Some(s) => (radius_for_sigma(s.max(0.0)), false),
-        None => {
-            // each candidate's score (mean squared prediction error) and its standard error
-            // (the candidates in parallel: each one's sums in the same order with any number
-            // of threads)
-            let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
-            let score_of = |r: usize| -> (usize, f64, f64) {
-                let mut halves = local_linear_many(&[(odd, false), (even, false)], &wt, w, h, r);
-                let (se, _) = halves.pop().unwrap_or_default();
-                let (so, _) = halves.pop().unwrap_or_default();
-                let (mut s, mut s2, mut cnt) = (0.0, 0.0, 0.0);
-                for i in 0..n {
-                    if odd[i].is_finite() && even[i].is_finite() && wt[i] > 0.0 {
-                        for (pred, other) in [(so[i], even[i]), (se[i], odd[i])] {
-                            if pred.is_finite() {
-                                let c = (pred - other).powi(2) * wt[i] / 2.0;
-                                s += c;
-                                s2 += c * c;
-                                cnt += 1.0;
-                            }
-                        }
-                    }
-                }
-                let (score, sem) = if cnt > 1.0 {
-                    let mean = s / cnt;
-                    let var = (s2 / cnt - mean * mean).max(0.0);
-                    (mean, (var / (cnt - 1.0)).sqrt())
-                } else {
-                    (f64::INFINITY, 0.0)
-                };
-                (r, score, sem)
-            };
-            // (one after the other: each one's blurs are in parallel, and two at once would
-            // hold twice the memory, some 20 full-size maps each)
-            let scored: Vec<(usize, f64, f64)> = candidates.iter().map(|&r| score_of(r)).collect();
-            for &(r, score, _) in &scored {
-                scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
-            }
-            let Some(&(_, min_score, min_sem)) = scored
-                .iter()
-                .filter(|c| c.1.is_finite())
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-            else {
-                return Err(PhotometricError::Calibration(
-                    "the odd and the even frames see no pixel in common; the smoothing cannot be chosen (record more frames)".into(),
-                ));
-            };
-            // the one-standard-error rule: the widest candidate whose score is within one
-            // standard error of the best; scores that differ by less than their noise do not
-            // decide (neighbouring widths often tie, and the argmin would flip between them)
-            let best = scored
-                .iter()
-                .filter(|c| c.1 <= min_score + min_sem)
-                .map(|c| c.0)
-                .max()
-                .unwrap_or(0);
-            // the full data: a kernel 2^(-1/6) as wide
-            let s_half = if best == 0 {
-                0.0
-            } else {
-                sigma_of_radius(best)
-            };
-            (radius_for_sigma(s_half * 2f64.powf(-1.0 / 6.0)), true)
-        }
+        None => (
+            cross_validated_radius(odd, even, &wt, (w, h), &mut scores)?,
+            true,
+        ),
     };
     // the map, and the halves smoothed as the whole is (for the variance's scale and the
     // bias below)
@@ -703,6 +659,80 @@ pub(crate) fn choose_smoothing(
             defects,
         },
     })
+}
+
+/// The smoothing radius chosen by cross-validation between the maps of the odd and of the
+/// even frames (`scores` gets every candidate's sigma and score): the widest candidate within
+/// one standard error of the best, narrowed for the full data.
+fn cross_validated_radius(
+    odd: &[f64],
+    even: &[f64],
+    wt: &[f64],
+    (w, h): (usize, usize),
+    scores: &mut Vec<(f64, f64)>,
+) -> Result<usize, PhotometricError> {
+    let n = w * h;
+    // each candidate's score (mean squared prediction error) and its standard error
+    // (the candidates in parallel: each one's sums in the same order with any number
+    // of threads)
+    let candidates: Vec<usize> = std::iter::once(0).chain(RADII).collect();
+    let score_of = |r: usize| -> (usize, f64, f64) {
+        let mut halves = local_linear_many(&[(odd, false), (even, false)], wt, w, h, r);
+        let (se, _) = halves.pop().unwrap_or_default();
+        let (so, _) = halves.pop().unwrap_or_default();
+        let (mut s, mut s2, mut cnt) = (0.0, 0.0, 0.0);
+        for i in 0..n {
+            if odd[i].is_finite() && even[i].is_finite() && wt[i] > 0.0 {
+                for (pred, other) in [(so[i], even[i]), (se[i], odd[i])] {
+                    if pred.is_finite() {
+                        let c = (pred - other).powi(2) * wt[i] / 2.0;
+                        s += c;
+                        s2 += c * c;
+                        cnt += 1.0;
+                    }
+                }
+            }
+        }
+        let (score, sem) = if cnt > 1.0 {
+            let mean = s / cnt;
+            let var = (s2 / cnt - mean * mean).max(0.0);
+            (mean, (var / (cnt - 1.0)).sqrt())
+        } else {
+            (f64::INFINITY, 0.0)
+        };
+        (r, score, sem)
+    };
+    // (one after the other: each one's blurs are in parallel, and two at once would
+    // hold twice the memory, some 20 full-size maps each)
+    let scored: Vec<(usize, f64, f64)> = candidates.iter().map(|&r| score_of(r)).collect();
+    for &(r, score, _) in &scored {
+        scores.push((if r == 0 { 0.0 } else { sigma_of_radius(r) }, score));
+    }
+    let Some(&(_, min_score, min_sem)) = scored
+        .iter()
+        .filter(|c| c.1.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+    else {
+        return Err(PhotometricError::Calibration(
+            "the odd and the even frames see no pixel in common; the smoothing cannot be chosen (record more frames)".into(),
+        ));
+    };
+    // the one-standard-error rule: the widest candidate whose score is within one
+    // standard error of the best; scores that differ by less than their noise do not
+    // decide (neighbouring widths often tie, and the argmin would flip between them)
+    let best = scored
+        .iter()
+        .filter(|c| c.1 <= min_score + min_sem)
+        .map(|c| c.0)
+        .max()
+        .unwrap_or(0);
+    // the full data: a kernel 2^(-1/6) as wide
+    let s_half = if best == 0 {
+        0.0
+    } else {
+        sigma_of_radius(best)
+    };
+    Ok(radius_for_sigma(s_half * 2f64.powf(-1.0 / 6.0)))
 }
 
 #[cfg(test)]

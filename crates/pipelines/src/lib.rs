@@ -66,8 +66,8 @@ pub use traj_metrics::{
     AlignmentReport, KittiReport, MetricReport, PlotData,
 };
 
-/// The README's Rust examples, compiled as doctests of this crate (which depends on every
-/// crate they use).
+/// The guide's Rust examples (docs/architecture.md), compiled as doctests of this crate
+/// (which depends on every crate they use).
 #[cfg(doctest)]
-#[doc = include_str!("../../../README.md")]
-pub struct ReadmeDoctests;
+#[doc = include_str!("../../../docs/architecture.md")]
+pub struct GuideDoctests;

@@ -1,7 +1,7 @@
 //! `monovo demo`: the whole benchmark, end to end, on synthetic data with known truth.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
@@ -125,9 +125,82 @@ pub fn run(args: &Args) -> Result<()> {
         cal.iterations, cal.rmse
     );
 
-    // 3. vignette calibration
+    let vig = vignette_step(args, &dir, &mut md)?;
+    let rectified = rectify_step(quiet, &dir, truth_seq.camera.omega, &mut md)?;
+
+    // 5. results of two methods, evaluated
     step(
         quiet,
+        5,
+        "generating and evaluating 1000 runs of two synthetic VO methods",
+    )?;
+    let res_out = OutputDir::create(&dir.join("benchmark"), false)?;
+    let res_spec = synth::ResultsSpec {
+        seed: args.seed,
+        ..Default::default()
+    };
+    synth::write_results(&res_out, &res_spec, &Bars::default())?;
+    res_out.commit()?;
+    let evaluation = evaluate_benchmark(&dir, &Bars::default())?;
+    let (records, eval_secs, lines) =
+        (&evaluation.records, evaluation.seconds, &evaluation.medians);
+    if !quiet {
+        outln!("      {} runs evaluated in {eval_secs:.2} s", records.len())?;
+    }
+    step(
+        quiet,
+        6,
+        "plotting: cumulative errors, metric study, alignment figure",
+    )?;
+    evaluation.draw(&dir, args.seed)?;
+
+    // 7. summary
+    step(quiet, 7, "writing summary.md")?;
+    md.push_str(&evaluation.markdown());
+    let total = started.elapsed().as_secs_f64();
+    let _ = writeln!(md, "Total demo time: {total:.1} s.");
+    dataset_io::write_atomic(&dir.join("summary.md"), md.as_bytes())?;
+    let final_dir = out.commit()?;
+    if args.json {
+        outln!(
+            "{}",
+            serde_json::json!({
+                "output": final_dir.display().to_string(),
+                "seconds": total,
+                "seed": args.seed,
+                "response": {"iterations": cal.iterations, "max_error_grey": max_err, "seconds": cal_secs},
+                "vignette": {"rms_relative_error": vig.rms, "raw_rms_relative_error": vig.raw_rms, "smoothing_px": vig.smoothing_px, "seconds": vig.seconds},
+                "rectified": rectified,
+                "evaluation": {
+                    "runs": records.len(),
+                    "seconds": eval_secs,
+                    "methods": medians_json(lines),
+                },
+                "files": demo_files(&final_dir),
+            })
+        )?;
+        return Ok(());
+    }
+    outln!()?;
+    outln!("{}", medians_text(lines))?;
+    outln!("wrote {} in {total:.0} s:", final_dir.display())?;
+    out!("{}", demo_files_text(&final_dir))?;
+    Ok(())
+}
+
+/// What the vignette step measured.
+struct VignetteSummary {
+    rms: f64,
+    raw_rms: f64,
+    smoothing_px: f64,
+    seconds: f64,
+}
+
+/// Step 3: a marker-plane video, its vignette calibrated and compared with the truth.
+fn vignette_step(args: &Args, dir: &Path, md: &mut String) -> Result<VignetteSummary> {
+    let dir = dir.to_path_buf();
+    step(
+        args.json,
         3,
         "calibrating the vignette from a marker-plane video (ArUco 213, 640x512, 100 frames)",
     )?;
@@ -173,7 +246,7 @@ pub fn run(args: &Args) -> Result<()> {
         dataset_io::PngSpeed::Default,
     )?;
     calib::vignette_figure(&run.cal, Some(&wall.vignette), &dir.join("vignette.png"))?;
-    if !quiet {
+    if !args.json {
         outln!(
             "      RMS relative error of V: {:.3}% (raw map {:.3}%), smoothing {:.1} px chosen by cross-validation ({vig_secs:.1} s)",
             vig_rms * 100.0,
@@ -193,7 +266,21 @@ pub fn run(args: &Args) -> Result<()> {
         run.cal.smoothing.sigma_px
     );
 
-    // 4. rectification and photometric correction
+    Ok(VignetteSummary {
+        rms: vig_rms,
+        raw_rms,
+        smoothing_px: vig_smoothing,
+        seconds: vig_secs,
+    })
+}
+
+/// Step 4: the sequence rectified to a 640x480 pinhole, response and vignette undone.
+fn rectify_step(
+    quiet: bool,
+    dir: &Path,
+    omega: f64,
+    md: &mut String,
+) -> Result<rectify::Rectified> {
     step(
         quiet,
         4,
@@ -217,70 +304,13 @@ pub fn run(args: &Args) -> Result<()> {
             rectified.frames as f64 / rectified.seconds.max(1e-9)
         )?;
     }
-    let k = write_frame_previews(&dir)?;
+    let k = write_frame_previews(dir)?;
     let _ = writeln!(
         md,
         "## Rectification\n\nFOV camera (omega {:.3}) at 640x512 to the `crop` pinhole at 640x480: fx={:.3} fy={:.3} cx={:.3} cy={:.3}; \
          response and vignette undone (linear output).\n\n![raw](frame_raw.png) ![rectified](frame_rectified.png)\n",
-        truth_seq.camera.omega, k.fx, k.fy, k.cx, k.cy
+        omega, k.fx, k.fy, k.cx, k.cy
     );
 
-    // 5. results of two methods, evaluated
-    step(
-        quiet,
-        5,
-        "generating and evaluating 1000 runs of two synthetic VO methods",
-    )?;
-    let res_out = OutputDir::create(&dir.join("benchmark"), false)?;
-    let res_spec = synth::ResultsSpec {
-        seed: args.seed,
-        ..Default::default()
-    };
-    synth::write_results(&res_out, &res_spec, &Bars::default())?;
-    res_out.commit()?;
-    let evaluation = evaluate_benchmark(&dir, &Bars::default())?;
-    let (records, eval_secs, lines) =
-        (&evaluation.records, evaluation.seconds, &evaluation.medians);
-    if !quiet {
-        outln!("      {} runs evaluated in {eval_secs:.2} s", records.len())?;
-    }
-    step(
-        quiet,
-        6,
-        "plotting: cumulative errors, metric study, alignment figure",
-    )?;
-    evaluation.draw(&dir, args.seed)?;
-
-    // 7. summary
-    step(quiet, 7, "writing summary.md")?;
-    md.push_str(&evaluation.markdown());
-    let total = started.elapsed().as_secs_f64();
-    let _ = writeln!(md, "Total demo time: {total:.1} s.");
-    dataset_io::write_atomic(&dir.join("summary.md"), md.as_bytes())?;
-    let final_dir = out.commit()?;
-    if args.json {
-        outln!(
-            "{}",
-            serde_json::json!({
-                "output": final_dir.display().to_string(),
-                "seconds": total,
-                "seed": args.seed,
-                "response": {"iterations": cal.iterations, "max_error_grey": max_err, "seconds": cal_secs},
-                "vignette": {"rms_relative_error": vig_rms, "raw_rms_relative_error": raw_rms, "smoothing_px": vig_smoothing, "seconds": vig_secs},
-                "rectified": rectified,
-                "evaluation": {
-                    "runs": records.len(),
-                    "seconds": eval_secs,
-                    "methods": medians_json(lines),
-                },
-                "files": demo_files(&final_dir),
-            })
-        )?;
-        return Ok(());
-    }
-    outln!()?;
-    outln!("{}", medians_text(lines))?;
-    outln!("wrote {} in {total:.0} s:", final_dir.display())?;
-    out!("{}", demo_files_text(&final_dir))?;
-    Ok(())
+    Ok(rectified)
 }

@@ -671,21 +671,12 @@ fn noise_from(p: &Problem<'_>, m: &Measured) -> Noise {
     Noise::uniform(&m.per_knot, med)
 }
 
-/// Runs the iteration.
-pub(super) fn solve(
-    p: &Problem<'_>,
-    start: Start,
-    set: &Settings<'_>,
-) -> Result<Fit, PhotometricError> {
+/// The state the iteration starts from: the given one, or the paper's alternation's `U` with
+/// `U(0) = 0`, scaled to the gauge, and the quantisation's variance as the first noise.
+fn start_state(p: &Problem<'_>, start: Start) -> (Vec<f64>, Vec<f64>, Noise, Option<Measured>) {
     let n = p.levels.knots;
-    let top = (n - 1) as f64;
     let npx = p.samples.len();
-    let ranges = chunks(p.samples, 256);
-    let (clip_lo, clip_hi) = p.clips();
-    // quantisation alone: a quarter of its variance as the floor
-    let floor = 0.25 * p.levels.scale * p.levels.scale / 12.0;
-    let warm = matches!(start, Start::Warm { .. });
-    let (mut u, mut b, mut noise, mut measured) = match start {
+    match start {
         Start::Warm {
             u,
             mut b,
@@ -698,14 +689,52 @@ pub(super) fn solve(
         Start::Cold => {
             let mut u = initial_response(p);
             u[0] = 0.0;
-            let g = 128.0 * top / 255.0 / u[gauge(n)].max(1e-12);
+            let g = 128.0 * (n - 1) as f64 / 255.0 / u[gauge(n)].max(1e-12);
             for v in u.iter_mut() {
                 *v *= g;
             }
             let var = p.levels.scale * p.levels.scale;
             (u, vec![f64::NAN; npx], Noise::measured(&vec![var; n]), None)
         }
-    };
+    }
+}
+
+/// The next `U`: the damped Gauss-Newton step, made non-negative and non-decreasing, scaled
+/// back to the gauge; and that scale (`B'` follows it).
+fn next_response(
+    u: &[f64],
+    sums: &Sums,
+    pen: &Penalty,
+    damping: f64,
+) -> Result<(Vec<f64>, f64), PhotometricError> {
+    let n = u.len();
+    let mut nu = solve_u_step(u, sums, pen, damping)?;
+    let info: Vec<f64> = (0..n).map(|k| sums.diag[k] + pen.hess[(k, k)]).collect();
+    for v in nu.iter_mut() {
+        *v = v.max(0.0);
+    }
+    make_monotone(&mut nu, &info);
+    let g = gauge(n);
+    let sc = u[g] / nu[g];
+    for v in nu.iter_mut() {
+        *v *= sc;
+    }
+    Ok((nu, sc))
+}
+
+/// Runs the iteration.
+pub(super) fn solve(
+    p: &Problem<'_>,
+    start: Start,
+    set: &Settings<'_>,
+) -> Result<Fit, PhotometricError> {
+    let n = p.levels.knots;
+    let ranges = chunks(p.samples, 256);
+    let (clip_lo, clip_hi) = p.clips();
+    // quantisation alone: a quarter of its variance as the floor
+    let floor = 0.25 * p.levels.scale * p.levels.scale / 12.0;
+    let warm = matches!(start, Start::Warm { .. });
+    let (mut u, mut b, mut noise, mut measured) = start_state(p, start);
     let mut prior = prior_weights(&u, p.log_gap, p.smoothness, p.prior_scale);
     let mut change = Vec::new();
     let mut damping = if warm { 0.0 } else { 0.3f64 };
@@ -771,17 +800,7 @@ pub(super) fn solve(
             u.clone_from(u0);
             b.clone_from(b0);
         }
-        let mut nu = solve_u_step(&u, sums, pen, damping)?;
-        let info: Vec<f64> = (0..n).map(|k| sums.diag[k] + pen.hess[(k, k)]).collect();
-        for v in nu.iter_mut() {
-            *v = v.max(0.0);
-        }
-        make_monotone(&mut nu, &info);
-        let g = gauge(n);
-        let sc = u[g] / nu[g];
-        for v in nu.iter_mut() {
-            *v *= sc;
-        }
+        let (nu, sc) = next_response(&u, sums, pen, damping)?;
         for v in b.iter_mut() {
             *v *= sc;
         }

@@ -80,7 +80,7 @@ impl Decompressor {
             // arithmetic coding (which libjpeg-turbo decodes) can spend less than a bit on a
             // block: the check of the data size is for Huffman-coded frames
             if tj::tj3Get(self.0, tj::TJPARAM_TJPARAM_ARITHMETIC as _) == 0 {
-                crate::sequence::check_jpeg_data_size(w, h, jpeg.len())?;
+                super::check_jpeg_data_size(w, h, jpeg.len())?;
             }
             let factor = tj::tjscalingfactor {
                 num: 1,
