@@ -118,7 +118,7 @@ impl Default for ResponseOptions {
             weighting: Weighting::Auto,
             choose_prior: true,
             huber: 5.0,
-            target_std_error: 0.1,
+            target_std_error: 0.03,
             max_pixels: DEFAULT_MAX_PIXELS,
         }
     }
