@@ -109,7 +109,7 @@ pub struct ResponseOptions {
 impl Default for ResponseOptions {
     fn default() -> Self {
         ResponseOptions {
-            max_iterations: 50,
+            max_iterations: 100,
             tolerance: 0.01,
             smoothness: 3.0,
             saturation_border: 2,

@@ -722,6 +722,13 @@ fn next_response(
     Ok((nu, sc))
 }
 
+/// Relative decrease of the objective below which an accepted step counts as flat.
+const OBJECTIVE_TOLERANCE: f64 = 1e-7;
+
+/// Flat steps in a row after which the iteration has converged: `U` still moves only where the
+/// data leave it free (the standard errors say where), and the fit no longer improves.
+const FLAT_STEPS: usize = 3;
+
 /// Runs the iteration.
 pub(super) fn solve(
     p: &Problem<'_>,
@@ -743,6 +750,8 @@ pub(super) fn solve(
     // the last state whose step was taken: U, B', the sums at them, the prior, the objective
     let mut accepted: Option<Accepted> = None;
     let mut taken_back = 0;
+    // accepted steps in a row that lowered the objective by less than OBJECTIVE_TOLERANCE
+    let mut flat = 0;
     let max_iter = set.max_iterations.max(1);
     for it in 0..max_iter {
         iterations = it + 1;
@@ -791,6 +800,13 @@ pub(super) fn solve(
             if !adapt {
                 damping /= 3.0;
             }
+            let before = accepted.as_ref().map_or(f64::INFINITY, |a| a.4);
+            let gain = before - objective;
+            flat = if before.is_finite() && gain <= OBJECTIVE_TOLERANCE * objective.abs() {
+                flat + 1
+            } else {
+                0
+            };
             accepted = Some((u.clone(), b.clone(), sums, pen, objective));
         }
         let Some((u0, b0, sums, pen, _)) = accepted.as_ref() else {
@@ -823,6 +839,7 @@ pub(super) fn solve(
         // any more (the objective's rounding and the B' steps' own error bound it)
         if (!worse && delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS))
             || taken_back >= MAX_TAKEN_BACK
+            || flat >= FLAT_STEPS
         {
             if taken_back > 0 {
                 u.clone_from(&accepted.as_ref().map_or(u.clone(), |a| a.0.clone()));
