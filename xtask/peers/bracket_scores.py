@@ -29,10 +29,10 @@ left-out value in 1..254 and at least one other frame with a value in 1..254):
 G = U^-1 is the piecewise-linear inverse of the table (made non-decreasing first),
 clamped to 0..255.
 
-Run (numbers committed in tests/fixtures/brackets/peer_scores.json):
+Run (the peers' numbers committed in tests/fixtures/brackets/peer_scores.json):
     python3 -m venv venv && venv/bin/pip install opencv-python-headless numpy
     venv/bin/python xtask/peers/bracket_scores.py tests/fixtures/brackets/*/ \
-        --monovo target/release/monovo [--tum2016 PATH/responseCalib] \
+        --no-monovo [--tum2016 PATH/responseCalib] --no-tables \
         --json tests/fixtures/brackets/peer_scores.json
 """
 import argparse
@@ -235,6 +235,8 @@ def main():
     ap.add_argument("--no-monovo", action="store_true", help="only the peers")
     ap.add_argument("--no-peers", action="store_true", help="only monovo")
     ap.add_argument("--monovo-args", default="", help="extra arguments of monovo calib response")
+    ap.add_argument("--no-tables", action="store_true",
+                    help="leave the fitted tables out of the JSON (scores only)")
     args = ap.parse_args()
     if args.no_monovo:
         args.monovo = None
@@ -250,6 +252,9 @@ def main():
     for folder in args.sets:
         name = os.path.basename(os.path.normpath(folder))
         res = score_set(folder, args)
+        if args.no_tables:
+            for r in res["methods"].values():
+                del r["tables"]
         out["sets"][name] = res
         for m, r in res["methods"].items():
             f = lambda v: "-" if v is None else f"{v:.3f}"

@@ -35,17 +35,20 @@ def main():
         with open(a.json, "w") as fh:
             json.dump({"versions": a.versions, "sets": s}, fh, indent=1, sort_keys=True)
             fh.write("\n")
-    print("| set | monovo | Debevec | Robertson | 2016 tool | best peer | monovo / best |")
-    print("|---|---:|---:|---:|---:|---|---:|")
+    print("| set | monovo | Debevec | Robertson | 2016 tool | best peer | monovo / best peer "
+          "| monovo / best OpenCV |")
+    print("|---|---:|---:|---:|---:|---|---:|---:|")
     for name in sorted(s):
         m = s[name]
         fmt = lambda k: "fails" if m.get(k, {}).get("ls") is None else f"{m[k]['ls']:.2f}"
         peers = [(m[k]["ls"], k) for k in PEERS if m.get(k, {}).get("ls") is not None]
         best = min(peers) if peers else (None, "-")
         mono = m.get("monovo", {}).get("ls")
-        ratio = "-" if mono is None or best[0] is None else f"{mono / best[0]:.2f}"
+        opencv = [m[k]["ls"] for k in PEERS[:2] if m.get(k, {}).get("ls") is not None]
+        ratio = "-" if mono is None or best[0] is None else f"{mono / best[0]:.3f}"
+        ratio_cv = "-" if mono is None or not opencv else f"{mono / min(opencv):.3f}"
         print(f"| {name} | {fmt('monovo')} | {fmt('debevec')} | {fmt('robertson')} | "
-              f"{fmt('tum2016')} | {best[1]} | {ratio} |")
+              f"{fmt('tum2016')} | {best[1]} | {ratio} | {ratio_cv} |")
 
 
 if __name__ == "__main__":

@@ -13,7 +13,11 @@ with the smallest integer f that makes the longer side at most --max-side:
 decimation without averaging keeps each pixel a pixel of the camera (an average of
 pixels is not the response of an average irradiance).
 
-    python3 xtask/peers/prepare_brackets.py SRC OUT --max-side 256
+An optional --crop X,Y,W,H (pixels of the original, top-left origin) is taken
+first: for a circular fisheye, the square inscribed in the image circle (outside
+it the lens barrel glows at long exposures).
+
+    python3 xtask/peers/prepare_brackets.py SRC OUT --max-side 256 [--crop X,Y,W,H]
 """
 import argparse
 import os
@@ -28,6 +32,7 @@ def main():
     ap.add_argument("src")
     ap.add_argument("out")
     ap.add_argument("--max-side", type=int, default=256)
+    ap.add_argument("--crop", help="X,Y,W,H of the original to keep")
     args = ap.parse_args()
     indexed = os.path.join(args.src, "indexed")
     names = sorted(os.listdir(indexed))
@@ -40,6 +45,11 @@ def main():
         img = cv2.imread(os.path.join(indexed, name), cv2.IMREAD_GRAYSCALE)
         if img is None:
             sys.exit(f"{name}: does not decode")
+        if args.crop:
+            x, y, cw, ch = (int(v) for v in args.crop.split(","))
+            if x < 0 or y < 0 or x + cw > img.shape[1] or y + ch > img.shape[0]:
+                sys.exit(f"{name}: --crop {args.crop} is outside the {img.shape[1]}x{img.shape[0]} image")
+            img = img[y:y + ch, x:x + cw]
         h, w = img.shape
         f = max(1, -(-max(w, h) // args.max_side))
         small = img[f // 2::f, f // 2::f]

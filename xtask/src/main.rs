@@ -9,6 +9,7 @@
 //! readable: file and function lengths, no import circles (see `house.rs`).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod brackets;
 mod exposure;
 mod fuzz;
 mod house;
@@ -49,11 +50,12 @@ impl Figure {
 /// Runs every stage of bench-synthetic, or the one `only` names.
 fn run_stages(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
     type Stage = fn(bool) -> Result<Vec<Figure>>;
-    let stages: [(&str, Stage); 6] = [
+    let stages: [(&str, Stage); 7] = [
         ("camera", stages::camera),
         ("eval", stages::eval),
         ("rectify", stages::rectify),
         ("response", response::stage),
+        ("brackets", brackets::stage),
         ("vignette", vignette::stage),
         ("demo", stages::demo),
     ];
@@ -94,10 +96,11 @@ fn usage() -> &'static str {
     "usage: cargo xtask bench-synthetic [--quick] [--only STAGE] [--json FILE] [--report FILE]\n       \
      cargo xtask fuzz [--cases N] [--quick] [--seed S] [--target NAME] (see fuzz --help)\n       \
      cargo xtask house\n\n\
-     bench-synthetic runs every stage on synthetic data, prints accuracy, speed and memory, and\n\
+     bench-synthetic runs every stage on synthetic data (and the real exposure brackets of\n\
+     tests/fixtures/brackets against the peers' scores), prints accuracy, speed and memory, and\n\
      fails when a figure is worse than xtask/thresholds.json. --quick is the CI variant\n\
      (smaller data, no demo stage); --only runs one stage: camera, eval, rectify, response,\n\
-     vignette or demo (monovo demo from start to end). --report docs/performance.md writes\n\
+     brackets, vignette or demo (monovo demo from start to end). --report docs/performance.md writes\n\
      the performance page from the run (machine, date, ratios, every figure).\n\
      fuzz feeds every parser arbitrary and mutated bytes and fails on a panic.\n\
      house fails on a source file over 1500 lines, a function over 150 lines or an import\n\

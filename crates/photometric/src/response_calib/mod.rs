@@ -38,6 +38,7 @@
 //!   (sandwich covariance with tiles of 32x32 pixels as the independent units: JPEG blocks and
 //!   demosaicing correlate neighbours) and what the prior and the continuation may add.
 
+mod logfit;
 mod measured;
 mod model;
 mod prior;
@@ -48,7 +49,7 @@ mod uncertainty;
 
 use camera_model::Image;
 
-pub use model::Weighting;
+pub use model::{Estimator, Weighting};
 pub use select::{CandidateScore, HeldOutScores};
 
 use crate::noise::{fit_noise, NoiseModel};
@@ -104,6 +105,9 @@ pub struct ResponseOptions {
     pub target_std_error: f64,
     /// Most pixels drawn (0: every pixel if the standard errors need them).
     pub max_pixels: usize,
+    /// The estimator: `auto` (the grey-domain maximum likelihood unless the log-domain fit
+    /// predicts held-out exposures clearly better), `grey` or `log`.
+    pub estimator: Estimator,
 }
 
 impl Default for ResponseOptions {
@@ -120,6 +124,7 @@ impl Default for ResponseOptions {
             huber: 5.0,
             target_std_error: 0.03,
             max_pixels: DEFAULT_MAX_PIXELS,
+            estimator: Estimator::Auto,
         }
     }
 }
@@ -213,7 +218,8 @@ pub struct ResponseCalibration {
     /// Standard error of each `U(k)` on the same scale (0 at the top, which is fixed):
     /// sampling and systematic parts together.
     pub std_error: Vec<f64>,
-    /// The systematic part: what the prior and the continuation beyond the data may add.
+    /// The systematic part: what the prior and the continuation beyond the data may add (for
+    /// the log-domain fit: its distance from the grey-domain fit on the same data).
     pub systematic_error: Vec<f64>,
     /// Iterations run (all fits of the growing sample together).
     pub iterations: usize,
@@ -240,6 +246,15 @@ pub struct ResponseCalibration {
     /// The shot/read/ADC model fitted to the measured noise (a description; in grey values,
     /// `U` on the `U(255) = 255` scale; `None` when it could not be fitted).
     pub noise: Option<NoiseModel>,
+    /// The estimator used: [`Estimator::Grey`] or [`Estimator::Log`] (then `weighting`,
+    /// `noise` and `prior_scale` describe the grey-domain fit that determined the range, and
+    /// `log_lambda` the prior of the table).
+    pub estimator: Estimator,
+    /// Debevec's `lambda` of the log-domain fit, when it made the table.
+    pub log_lambda: Option<f64>,
+    /// The log-domain fit took every value between the clipping points (also those next to
+    /// saturated pixels, which the grey-domain fit drops).
+    pub log_all_values: bool,
     /// The weights used.
     pub weighting: Weighting,
     /// The prior's weight relative to what the exposures' ripples need (1, or what the
@@ -533,25 +548,36 @@ fn calibrate<T: Sample>(
         Weighting::Measured => &[true],
         Weighting::Uniform => &[false],
     };
-    let held_out = if weightings.len() > 1 || options.choose_prior {
-        // fewer pixels for longer sweeps: the check's cost grows with the observations
-        let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-        let check = draw(
-            frames,
-            &sc,
-            top,
-            options.saturation_border,
-            options.saturation_block,
-            n,
-        );
-        let (measured, prior_scale, scores) =
-            select::choose(&base, &check, weightings, options.choose_prior)?;
-        base.measured = measured;
-        base.prior_scale = prior_scale;
-        Some(scores)
-    } else {
-        None
-    };
+    let mut log_choice: Option<(f64, bool)> = None;
+    let held_out =
+        if weightings.len() > 1 || options.choose_prior || options.estimator != Estimator::Grey {
+            // fewer pixels for longer sweeps: the check's cost grows with the observations
+            let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
+            let check = draw(
+                frames,
+                &sc,
+                top,
+                options.saturation_border,
+                options.saturation_block,
+                n,
+            );
+            let (choice, scores) = select::choose(
+                &base,
+                &check,
+                weightings,
+                options.choose_prior,
+                options.estimator,
+            )?;
+            if choice.estimator == Estimator::Log {
+                log_choice = Some((choice.prior_scale, choice.all_values));
+            } else {
+                base.measured = choice.measured;
+                base.prior_scale = choice.prior_scale;
+            }
+            Some(scores)
+        } else {
+            None
+        };
     let grown = fit_growing(frames, &base, &sc, options, progress)?;
     let fit = &grown.fit;
 
@@ -571,18 +597,21 @@ fn calibrate<T: Sample>(
     let filled: Vec<u32> = (0..=top).filter(|&v| v < g_lo || v > g_hi).collect();
     let warnings = check_range(&levels, k_lo, k_hi, &distinct, fit, &grown)?;
 
-    let (first, last) = data_range(&fit.sums.used);
-    let errors = standard_errors(fit, first, last)?;
-    let base_u = normalized(&extrapolate(&fit.u, first, last).0);
-    // the sensitivities estimate the systematic errors only to within a factor: the band is
-    // UNCERTAINTY_FACTOR times the combined estimate, with a floor of 0.1% of U
-    let mut std_error = vec![0.0; nk];
-    let mut systematic = vec![0.0; nk];
-    for k in 0..nk - 1 {
-        systematic[k] = UNCERTAINTY_FACTOR * errors.systematic[k];
-        let total = errors.sampling[k].hypot(errors.systematic[k]);
-        std_error[k] = (UNCERTAINTY_FACTOR * total).hypot(UNCERTAINTY_FLOOR * base_u[k]);
-    }
+    let data = |all| logfit::Data {
+        samples: &grown.samples,
+        exposures: exposures_ms,
+        train: None,
+        levels: &levels,
+        all,
+    };
+    let (base_u, std_error, systematic, rmse, sampling_error) = match log_choice {
+        Some((lambda, all)) => log_tables(fit, &data(all), lambda, (k_lo, k_hi))?,
+        None => {
+            let (u, se, sys) = grey_tables(fit)?;
+            let rmse = (fit.sums.ss / fit.sums.nres.max(1) as f64).sqrt() / levels.scale;
+            (u, se, sys, rmse, grown.sampling_error)
+        }
+    };
     let (table, std_error, systematic) = if nk == top as usize + 1 {
         (base_u, std_error, systematic)
     } else {
@@ -594,7 +623,6 @@ fn calibrate<T: Sample>(
         (all(&base_u), all(&std_error), all(&systematic))
     };
     let response = InverseResponse::from_values(table)?;
-    let rmse = (fit.sums.ss / fit.sums.nres.max(1) as f64).sqrt() / levels.scale;
     let (measured_noise, noise) = describe_noise(fit.measured.as_ref(), &fit.u, levels);
     Ok(ResponseCalibration {
         response,
@@ -610,6 +638,13 @@ fn calibrate<T: Sample>(
         knot_step: 1.0 / levels.scale,
         measured_noise,
         noise,
+        estimator: if log_choice.is_some() {
+            Estimator::Log
+        } else {
+            Estimator::Grey
+        },
+        log_lambda: log_choice.map(|c| c.0),
+        log_all_values: log_choice.is_some_and(|c| c.1),
         weighting: if base.measured {
             Weighting::Measured
         } else {
@@ -621,9 +656,62 @@ fn calibrate<T: Sample>(
         pixels_sampled: grown.samples.len(),
         pixels_available: sc.order.len(),
         histogram: sc.histogram,
-        sampling_error: grown.sampling_error,
+        sampling_error,
         warnings,
     })
+}
+
+/// The grey-domain fit's table (`U(top) = 255`, continued beyond the data), its standard
+/// errors and their systematic part.
+fn grey_tables(fit: &Fit) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), PhotometricError> {
+    let nk = fit.u.len();
+    let (first, last) = data_range(&fit.sums.used);
+    let errors = standard_errors(fit, first, last)?;
+    let base_u = normalized(&extrapolate(&fit.u, first, last).0);
+    // the sensitivities estimate the systematic errors only to within a factor: the band is
+    // UNCERTAINTY_FACTOR times the combined estimate, with a floor of 0.1% of U
+    let mut std_error = vec![0.0; nk];
+    let mut systematic = vec![0.0; nk];
+    for k in 0..nk - 1 {
+        systematic[k] = UNCERTAINTY_FACTOR * errors.systematic[k];
+        let total = errors.sampling[k].hypot(errors.systematic[k]);
+        std_error[k] = (UNCERTAINTY_FACTOR * total).hypot(UNCERTAINTY_FLOOR * base_u[k]);
+    }
+    Ok((base_u, std_error, systematic))
+}
+
+/// The log-domain fit's table, its standard errors and their systematic part, its residual
+/// RMS (grey values) and the RMS sampling error over `range`. The sampling part comes from the
+/// spread of its residuals; the systematic part is how far it lies from the grey-domain fit
+/// `fit` on the same data (the two estimators' disagreement: the log-domain prior's bias
+/// where the data follow the camera model, the model's misfit where they do not).
+fn log_tables(
+    fit: &Fit,
+    data: &logfit::Data<'_>,
+    lambda: f64,
+    range: (usize, usize),
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, f64, f64), PhotometricError> {
+    let nk = data.levels.knots;
+    let lf = logfit::fit(data, lambda)?;
+    let rmse = logfit::grey_rmse(data, &lf.u);
+    let (grey, _, _) = grey_tables(fit)?;
+    let band = &lf.u[range.0..=range.1];
+    let sampling = (band
+        .iter()
+        .zip(&lf.se_log[range.0..=range.1])
+        .map(|(u, e)| (u * e).powi(2))
+        .sum::<f64>()
+        / band.len().max(1) as f64)
+        .sqrt();
+    let mut se = vec![0.0; nk];
+    let mut systematic = vec![0.0; nk];
+    // (0 at the top, the gauge)
+    for k in 0..nk - 1 {
+        systematic[k] = (lf.u[k] - grey[k]).abs();
+        let e = UNCERTAINTY_FACTOR * lf.u[k] * lf.se_log[k];
+        se[k] = e.hypot(systematic[k]).hypot(UNCERTAINTY_FLOOR * lf.u[k]);
+    }
+    Ok((lf.u, se, systematic, rmse, sampling))
 }
 
 /// The median of the prior's per-row weights (reported).

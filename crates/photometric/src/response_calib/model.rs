@@ -79,6 +79,21 @@ pub enum Weighting {
     Uniform,
 }
 
+/// Which estimator fits `U`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Estimator {
+    /// Choose by the predictive score of held-out exposures: the grey-domain fit unless the
+    /// log-domain one predicts them clearly better.
+    #[default]
+    Auto,
+    /// Maximum likelihood in grey values (the camera's model: noise, clipping, censoring).
+    Grey,
+    /// Debevec and Malik's least squares on `ln U` with hat weights (for tone-mapping
+    /// cameras whose data no global response explains).
+    Log,
+}
+
 /// The noise at every knot as the calibration uses it: its standard deviation (knots), which
 /// says how far off a value is and how likely clipping is, and the weight of an observation
 /// predicted there (the inverse variance, or the same everywhere).

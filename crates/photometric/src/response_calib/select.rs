@@ -8,15 +8,20 @@
 //! clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
 //! tie keeps the prior the ripples need).
 
-use super::model::{Forward, Obs};
+use super::logfit;
+use super::model::{Estimator, Forward, Obs};
 use super::samples::Samples;
 use super::solver::{solve, Problem, Settings, Start};
 use crate::noise::interp;
 use crate::PhotometricError;
 
-/// Folds of the check: every distinct exposure its own fold up to this many, else this many
-/// interleaved folds (by exposure rank): every exposure is held out once.
+/// Folds of the check: every distinct exposure its own fold up to [`LOEO_FOLDS`] exposures
+/// (a bracket: leave one exposure out), else this many interleaved folds (by exposure rank):
+/// every exposure is held out once.
 const MAX_FOLDS: usize = 8;
+
+/// Up to this many distinct exposures, each is a fold of its own.
+const LOEO_FOLDS: usize = 16;
 
 /// Iterations of a fold's fit (warm from the fit on all exposures).
 const FOLD_ITERATIONS: usize = 6;
@@ -24,10 +29,22 @@ const FOLD_ITERATIONS: usize = 6;
 /// One candidate fit and its held-out score.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CandidateScore {
-    /// Weighted by the measured noise (else uniformly).
+    /// The estimator: [`Estimator::Grey`] or [`Estimator::Log`].
+    #[serde(default = "grey")]
+    pub estimator: Estimator,
+    /// Weighted by the measured noise (else uniformly; the grey-domain fit).
     pub measured: bool,
-    /// The prior's weight relative to what the exposures' ripples need.
+    /// The grey-domain fit: the prior's weight relative to what the exposures' ripples need.
+    /// The log-domain fit: Debevec's `lambda` (the prior's weight at 70 pixels).
     pub prior_scale: f64,
+    /// The fold fits started afresh (the log-domain fit and the grey-domain one it competes
+    /// with); else from the fit on all exposures.
+    #[serde(default)]
+    pub cold: bool,
+    /// The log-domain fit also took the values next to saturated pixels (which the
+    /// grey-domain fit drops, and which are never scored).
+    #[serde(default)]
+    pub all_values: bool,
     /// RMS prediction error of the held-out frames, grey values.
     pub rms: f64,
 }
@@ -47,6 +64,34 @@ pub struct HeldOutScores {
     pub pixels: usize,
 }
 
+fn grey() -> Estimator {
+    Estimator::Grey
+}
+
+/// What the check chose.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Choice {
+    /// [`Estimator::Grey`] or [`Estimator::Log`].
+    pub estimator: Estimator,
+    /// The grey-domain fit's weights.
+    pub measured: bool,
+    /// The grey-domain fit's prior scale, or the log-domain fit's `lambda`.
+    pub prior_scale: f64,
+    /// The fold fits started afresh.
+    pub cold: bool,
+    /// The log-domain fit on every value between the clipping points (also those next to
+    /// saturated pixels).
+    pub all_values: bool,
+}
+
+/// The log-domain fit's `lambda`s the check tries: Debevec's 10, and half a decade either
+/// side.
+pub(super) const LOG_LAMBDAS: [f64; 3] = [3.0, 10.0, 30.0];
+
+/// How much better (relative RMS) the log-domain fit must predict than the grey-domain one to
+/// be chosen: when the camera follows the grey-domain model, that fit is the efficient one.
+const LOG_MARGIN: f64 = 0.02;
+
 /// The priors the check tries, strongest first.
 pub(super) const PRIOR_SCALES: [f64; 3] = [1.0, 0.1, 0.01];
 
@@ -58,7 +103,11 @@ pub(super) fn folds(exposures: &[f64]) -> (Vec<usize>, usize) {
     let mut distinct: Vec<f64> = exposures.to_vec();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup_by(|a, b| (*a / *b - 1.0).abs() < 1e-6);
-    let k = distinct.len().min(MAX_FOLDS);
+    let k = if distinct.len() <= LOEO_FOLDS {
+        distinct.len()
+    } else {
+        MAX_FOLDS
+    };
     let fold = exposures
         .iter()
         .map(|&t| {
@@ -109,9 +158,16 @@ pub(super) fn ripple_period(exposures: &[f64], keep: Option<&[bool]>) -> f64 {
 /// undetermined.
 const GRID_TOLERANCE: f64 = 0.15;
 
-/// The held-out residuals (grey values) of one candidate, fold by fold, pixel by pixel, frame
-/// by frame; NaN where its fit failed.
-fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, PhotometricError> {
+/// The held-out residuals (grey values) of one grey-domain candidate, fold by fold, pixel by
+/// pixel, frame by frame; NaN where its fit failed. The fold fits start from the fit on all
+/// exposures and take a few steps (`cold`: from the start every fit takes, to convergence, so
+/// that nothing of the held-out frames leaks into them).
+fn held_out(
+    base: &Problem<'_>,
+    fold: &[usize],
+    k: usize,
+    cold: bool,
+) -> Result<Vec<f32>, PhotometricError> {
     let quiet = |_: usize, _: f64| {};
     let all = solve(
         base,
@@ -123,9 +179,6 @@ fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, Ph
             progress: &quiet,
         },
     )?;
-    let s = base.samples;
-    let lv = base.levels;
-    let per_grey = 1.0 / lv.scale;
     let mut out = Vec::new();
     for f in 0..k {
         let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
@@ -134,70 +187,132 @@ fn held_out(base: &Problem<'_>, fold: &[usize], k: usize) -> Result<Vec<f32>, Ph
             log_gap: ripple_period(base.exposures, Some(&train)),
             ..*base
         };
-        let fit = solve(
-            &p,
-            Start::Warm {
-                u: all.u.clone(),
-                b: all.b.clone(),
-                noise: all.noise.clone(),
-                measured: None,
-            },
-            &Settings {
-                max_iterations: FOLD_ITERATIONS,
-                tolerance: 0.05,
-                tiles: false,
-                progress: &quiet,
-            },
-        );
-        let u = fit.as_ref().ok().map(|f| (f.u.clone(), Forward::new(&f.u)));
-        for px in 0..s.len() {
-            let vals = s.pixel(px);
-            let inside = |i: usize, v: u16| {
-                !s.is_excluded(px, i) && matches!(Obs::of(v as u32, &lv), Obs::Value(_))
-            };
-            // the least-squares irradiance from the training values
-            let (mut num, mut den) = (0.0, 0.0);
-            if let Some((table, _)) = &u {
-                for (i, &v) in vals.iter().enumerate() {
-                    if train[i] && inside(i, v) {
-                        let t = base.exposures[i];
-                        num += t * interp(table, lv.pos(v as u32));
-                        den += t * t;
-                    }
-                }
-            }
-            let has = vals
-                .iter()
-                .enumerate()
-                .any(|(i, &v)| train[i] && inside(i, v));
-            for (i, &v) in vals.iter().enumerate() {
-                if fold[i] != f || !inside(i, v) || !has {
-                    continue;
-                }
-                let r = match &u {
-                    Some((_, g)) if den > 0.0 => {
-                        let (j, fr) = g.eval(base.exposures[i] * num / den);
-                        let mu = (j as f64 + fr).clamp(0.0, (lv.knots - 1) as f64);
-                        ((lv.pos(v as u32) - mu) * per_grey) as f32
-                    }
-                    _ => f32::NAN,
-                };
-                out.push(r);
-            }
-        }
+        let fit = if cold {
+            solve(
+                &p,
+                Start::Cold,
+                &Settings {
+                    max_iterations: 40,
+                    tolerance: 0.02,
+                    tiles: false,
+                    progress: &quiet,
+                },
+            )
+        } else {
+            solve(
+                &p,
+                Start::Warm {
+                    u: all.u.clone(),
+                    b: all.b.clone(),
+                    noise: all.noise.clone(),
+                    measured: None,
+                },
+                &Settings {
+                    max_iterations: FOLD_ITERATIONS,
+                    tolerance: 0.05,
+                    tiles: false,
+                    progress: &quiet,
+                },
+            )
+        };
+        let u = fit.ok().map(|f| f.u);
+        fold_residuals(base, fold, f, &train, u.as_deref(), &mut out);
     }
     Ok(out)
 }
 
+/// The held-out residuals of the log-domain estimator with each of `lambdas` (on the values the
+/// grey-domain fit uses, or on `all` of them), in the order of [`held_out`]'s.
+fn held_out_log(
+    base: &Problem<'_>,
+    fold: &[usize],
+    k: usize,
+    lambdas: &[f64],
+    all: bool,
+) -> Vec<Vec<f32>> {
+    let mut out = vec![Vec::new(); lambdas.len()];
+    for f in 0..k {
+        let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
+        let eq = logfit::normal(&logfit::Data {
+            samples: base.samples,
+            exposures: base.exposures,
+            train: Some(&train),
+            levels: &base.levels,
+            all,
+        });
+        for (o, &lambda) in out.iter_mut().zip(lambdas) {
+            let u = eq
+                .as_ref()
+                .ok()
+                .and_then(|eq| logfit::solve(eq, &base.levels, lambda).ok());
+            fold_residuals(base, fold, f, &train, u.as_deref(), o);
+        }
+    }
+    out
+}
+
+/// Appends the residuals of fold `f`'s frames predicted through the table `u` fitted without
+/// them (NaN for each when there is no table): each pixel's irradiance from its training
+/// values by least squares, then `G(t B')` against the recorded value. The values the
+/// grey-domain fit drops (next to saturated pixels: blooming, the compression's ringing) are
+/// neither merged nor scored: no global response describes them.
+fn fold_residuals(
+    base: &Problem<'_>,
+    fold: &[usize],
+    f: usize,
+    train: &[bool],
+    u: Option<&[f64]>,
+    out: &mut Vec<f32>,
+) {
+    let s = base.samples;
+    let lv = base.levels;
+    let per_grey = 1.0 / lv.scale;
+    let g = u.map(Forward::new);
+    for px in 0..s.len() {
+        let vals = s.pixel(px);
+        let inside = |i: usize, v: u16| {
+            !s.is_excluded(px, i) && matches!(Obs::of(v as u32, &lv), Obs::Value(_))
+        };
+        // the least-squares irradiance from the training values
+        let (mut num, mut den) = (0.0, 0.0);
+        let mut has = false;
+        for (i, &v) in vals.iter().enumerate() {
+            if train[i] && inside(i, v) {
+                has = true;
+                if let Some(table) = u {
+                    let t = base.exposures[i];
+                    num += t * interp(table, lv.pos(v as u32));
+                    den += t * t;
+                }
+            }
+        }
+        for (i, &v) in vals.iter().enumerate() {
+            if fold[i] != f || !inside(i, v) || !has {
+                continue;
+            }
+            let r = match &g {
+                Some(g) if den > 0.0 => {
+                    let (j, fr) = g.eval(base.exposures[i] * num / den);
+                    let mu = (j as f64 + fr).clamp(0.0, (lv.knots - 1) as f64);
+                    ((lv.pos(v as u32) - mu) * per_grey) as f32
+                }
+                _ => f32::NAN,
+            };
+            out.push(r);
+        }
+    }
+}
+
 /// Scores the candidates (measured and uniform weights, each with the priors of
-/// [`PRIOR_SCALES`] when `priors`) on `samples`; returns the chosen one's weighting and prior
-/// scale, with the scores.
+/// [`PRIOR_SCALES`] when `priors`; the log-domain fit with the `lambda`s of [`LOG_LAMBDAS`]
+/// unless `estimator` is [`Estimator::Grey`]) on `samples`; returns the choice and the scores.
 pub(super) fn choose(
     base: &Problem<'_>,
     samples: &Samples,
     weightings: &[bool],
     priors: bool,
-) -> Result<(bool, f64, HeldOutScores), PhotometricError> {
+    estimator: Estimator,
+) -> Result<(Choice, HeldOutScores), PhotometricError> {
     let (fold, k) = folds(base.exposures);
     let scales: &[f64] = if priors {
         &PRIOR_SCALES
@@ -206,24 +321,87 @@ pub(super) fn choose(
     };
     let mut cands = Vec::new();
     let mut residuals = Vec::new();
-    for &prior_scale in scales {
-        for &measured in weightings {
-            let p = Problem {
-                measured,
-                prior_scale,
-                samples,
-                ..*base
-            };
-            residuals.push(held_out(&p, &fold, k)?);
-            cands.push((measured, prior_scale));
+    let p0 = Problem { samples, ..*base };
+    if estimator != Estimator::Log {
+        for &prior_scale in scales {
+            for &measured in weightings {
+                let p = Problem {
+                    measured,
+                    prior_scale,
+                    ..p0
+                };
+                residuals.push(held_out(&p, &fold, k, false)?);
+                cands.push(Choice {
+                    estimator: Estimator::Grey,
+                    measured,
+                    prior_scale,
+                    cold: false,
+                    all_values: false,
+                });
+            }
         }
     }
+    // the grey-domain choice, and its honest score against the log-domain fits: fold fits
+    // that start afresh
+    let pre = common_rms(&residuals);
+    let mut chosen = pick(&cands, &pre.0);
+    if estimator != Estimator::Grey {
+        let grey = cands.get(chosen).copied();
+        if let Some(g) = grey {
+            let p = Problem {
+                measured: g.measured,
+                prior_scale: g.prior_scale,
+                ..p0
+            };
+            residuals.push(held_out(&p, &fold, k, true)?);
+            cands.push(Choice { cold: true, ..g });
+        }
+        for all in [false, true] {
+            residuals.extend(held_out_log(&p0, &fold, k, &LOG_LAMBDAS, all));
+            for &lambda in &LOG_LAMBDAS {
+                cands.push(Choice {
+                    estimator: Estimator::Log,
+                    measured: false,
+                    prior_scale: lambda,
+                    cold: true,
+                    all_values: all,
+                });
+            }
+        }
+    }
+    let rms = common_rms(&residuals);
+    if estimator != Estimator::Grey {
+        chosen = pick(&cands, &rms.0);
+    }
+    let scores = HeldOutScores {
+        candidates: cands
+            .iter()
+            .zip(&rms.0)
+            .map(|(c, &rms)| CandidateScore {
+                estimator: c.estimator,
+                measured: c.measured,
+                prior_scale: c.prior_scale,
+                cold: c.cold,
+                all_values: c.all_values,
+                rms,
+            })
+            .collect(),
+        chosen,
+        observations: rms.1,
+        folds: k,
+        pixels: samples.len(),
+    };
+    Ok((cands[chosen], scores))
+}
+
+/// Every candidate's RMS over the residuals that all of them have, and their number.
+fn common_rms(residuals: &[Vec<f32>]) -> (Vec<f64>, u64) {
     let len = residuals.iter().map(Vec::len).min().unwrap_or(0);
     let common: Vec<bool> = (0..len)
         .map(|j| residuals.iter().all(|r| r[j].is_finite()))
         .collect();
     let n = common.iter().filter(|&&c| c).count() as u64;
-    let rms: Vec<f64> = residuals
+    let rms = residuals
         .iter()
         .map(|r| {
             let ss: f64 = (0..len)
@@ -233,33 +411,42 @@ pub(super) fn choose(
             (ss / n.max(1) as f64).sqrt()
         })
         .collect();
-    // the best of each prior; a weaker prior replaces a stronger one only by the margin
-    let mut chosen = 0;
-    for c in 1..cands.len() {
-        let weaker = cands[c].1 < cands[chosen].1;
-        let margin = if weaker {
-            1.0 - WEAKER_PRIOR_MARGIN
-        } else {
-            1.0
-        };
-        if rms[c] < rms[chosen] * margin {
-            chosen = c;
+    (rms, n)
+}
+
+/// The choice: the best grey-domain candidate (a weaker prior replaces a stronger one only by
+/// [`WEAKER_PRIOR_MARGIN`]); when the log-domain fit competes, the best of its candidates
+/// replaces it only if it predicts better by [`LOG_MARGIN`] than the same grey-domain
+/// candidate refitted afresh in every fold.
+fn pick(cands: &[Choice], rms: &[f64]) -> usize {
+    let better = |c: usize, than: usize, margin: f64| rms[c] < rms[than] * (1.0 - margin);
+    let mut grey: Option<usize> = None;
+    let mut cold: Option<usize> = None;
+    let mut log: Option<usize> = None;
+    for (c, cand) in cands.iter().enumerate() {
+        match (cand.estimator, cand.cold) {
+            (Estimator::Log, _) => {
+                if log.is_none_or(|l| better(c, l, 0.0)) {
+                    log = Some(c);
+                }
+            }
+            (_, true) => cold = Some(c),
+            (_, false) => match grey {
+                None => grey = Some(c),
+                Some(g) => {
+                    let weaker = cand.prior_scale < cands[g].prior_scale;
+                    let margin = if weaker { WEAKER_PRIOR_MARGIN } else { 0.0 };
+                    if better(c, g, margin) {
+                        grey = Some(c);
+                    }
+                }
+            },
         }
     }
-    let scores = HeldOutScores {
-        candidates: cands
-            .iter()
-            .zip(&rms)
-            .map(|(&(measured, prior_scale), &rms)| CandidateScore {
-                measured,
-                prior_scale,
-                rms,
-            })
-            .collect(),
-        chosen,
-        observations: n,
-        folds: k,
-        pixels: samples.len(),
-    };
-    Ok((cands[chosen].0, cands[chosen].1, scores))
+    match (grey, cold, log) {
+        (Some(_), Some(c), Some(l)) if better(l, c, LOG_MARGIN) => l,
+        (Some(g), _, _) => g,
+        (None, _, Some(l)) => l,
+        (None, _, None) => 0,
+    }
 }
