@@ -543,41 +543,7 @@ fn calibrate<T: Sample>(
         measured: options.weighting != Weighting::Uniform,
         prior_scale: 1.0,
     };
-    let weightings: &[bool] = match options.weighting {
-        Weighting::Auto => &[true, false],
-        Weighting::Measured => &[true],
-        Weighting::Uniform => &[false],
-    };
-    let mut log_choice: Option<(f64, bool)> = None;
-    let held_out =
-        if weightings.len() > 1 || options.choose_prior || options.estimator != Estimator::Grey {
-            // fewer pixels for longer sweeps: the check's cost grows with the observations
-            let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-            let check = draw(
-                frames,
-                &sc,
-                top,
-                options.saturation_border,
-                options.saturation_block,
-                n,
-            );
-            let (choice, scores) = select::choose(
-                &base,
-                &check,
-                weightings,
-                options.choose_prior,
-                options.estimator,
-            )?;
-            if choice.estimator == Estimator::Log {
-                log_choice = Some((choice.prior_scale, choice.all_values));
-            } else {
-                base.measured = choice.measured;
-                base.prior_scale = choice.prior_scale;
-            }
-            Some(scores)
-        } else {
-            None
-        };
+    let (held_out, log_choice) = held_out_check(frames, &sc, &mut base, options)?;
     let grown = fit_growing(frames, &base, &sc, options, progress)?;
     let fit = &grown.fit;
 
@@ -659,6 +625,49 @@ fn calibrate<T: Sample>(
         sampling_error,
         warnings,
     })
+}
+
+/// The held-out check, when there is a choice: sets the grey-domain fit's weights and prior in
+/// `base`, and returns the scores and the log-domain fit's `lambda` and value choice when that
+/// fit was chosen.
+#[allow(clippy::type_complexity)]
+fn held_out_check<T: Sample>(
+    frames: &[Image<T>],
+    sc: &samples::Scan,
+    base: &mut Problem<'_>,
+    options: &ResponseOptions,
+) -> Result<(Option<HeldOutScores>, Option<(f64, bool)>), PhotometricError> {
+    let weightings: &[bool] = match options.weighting {
+        Weighting::Auto => &[true, false],
+        Weighting::Measured => &[true],
+        Weighting::Uniform => &[false],
+    };
+    if weightings.len() == 1 && !options.choose_prior && options.estimator == Estimator::Grey {
+        return Ok((None, None));
+    }
+    // fewer pixels for longer sweeps: the check's cost grows with the observations
+    let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
+    let check = draw(
+        frames,
+        sc,
+        base.levels.top,
+        options.saturation_border,
+        options.saturation_block,
+        n,
+    );
+    let (choice, scores) = select::choose(
+        base,
+        &check,
+        weightings,
+        options.choose_prior,
+        options.estimator,
+    )?;
+    if choice.estimator == Estimator::Log {
+        return Ok((Some(scores), Some((choice.prior_scale, choice.all_values))));
+    }
+    base.measured = choice.measured;
+    base.prior_scale = choice.prior_scale;
+    Ok((Some(scores), None))
 }
 
 /// The grey-domain fit's table (`U(top) = 255`, continued beyond the data), its standard

@@ -88,10 +88,6 @@ pub(super) struct Choice {
 /// side.
 pub(super) const LOG_LAMBDAS: [f64; 3] = [3.0, 10.0, 30.0];
 
-/// How much better (relative RMS) the log-domain fit must predict than the grey-domain one to
-/// be chosen: when the camera follows the grey-domain model, that fit is the efficient one.
-const LOG_MARGIN: f64 = 0.02;
-
 /// The priors the check tries, strongest first.
 pub(super) const PRIOR_SCALES: [f64; 3] = [1.0, 0.1, 0.01];
 
@@ -216,7 +212,7 @@ fn held_out(
             )
         };
         let u = fit.ok().map(|f| f.u);
-        fold_residuals(base, fold, f, &train, u.as_deref(), &mut out);
+        fold_residuals(base, fold, f, &train, u.as_deref(), &mut out, None);
     }
     Ok(out)
 }
@@ -245,10 +241,21 @@ fn held_out_log(
                 .as_ref()
                 .ok()
                 .and_then(|eq| logfit::solve(eq, &base.levels, lambda).ok());
-            fold_residuals(base, fold, f, &train, u.as_deref(), o);
+            fold_residuals(base, fold, f, &train, u.as_deref(), o, None);
         }
     }
     out
+}
+
+/// The tile of every held-out residual, in the order of [`held_out`]'s.
+fn residual_tiles(base: &Problem<'_>, fold: &[usize], k: usize) -> Vec<u32> {
+    let mut r = Vec::new();
+    let mut tiles = Vec::new();
+    for f in 0..k {
+        let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
+        fold_residuals(base, fold, f, &train, None, &mut r, Some(&mut tiles));
+    }
+    tiles
 }
 
 /// Appends the residuals of fold `f`'s frames predicted through the table `u` fitted without
@@ -263,6 +270,7 @@ fn fold_residuals(
     train: &[bool],
     u: Option<&[f64]>,
     out: &mut Vec<f32>,
+    mut tiles: Option<&mut Vec<u32>>,
 ) {
     let s = base.samples;
     let lv = base.levels;
@@ -299,6 +307,9 @@ fn fold_residuals(
                 _ => f32::NAN,
             };
             out.push(r);
+            if let Some(t) = tiles.as_deref_mut() {
+                t.push(s.tile[px]);
+            }
         }
     }
 }
@@ -344,7 +355,7 @@ pub(super) fn choose(
     // the grey-domain choice, and its honest score against the log-domain fits: fold fits
     // that start afresh
     let pre = common_rms(&residuals);
-    let mut chosen = pick(&cands, &pre.0);
+    let mut chosen = pick(&cands, &pre.0, &|_, _| false);
     if estimator != Estimator::Grey {
         let grey = cands.get(chosen).copied();
         if let Some(g) = grey {
@@ -371,7 +382,10 @@ pub(super) fn choose(
     }
     let rms = common_rms(&residuals);
     if estimator != Estimator::Grey {
-        chosen = pick(&cands, &rms.0);
+        let tiles = residual_tiles(&p0, &fold, k);
+        let better =
+            |a: usize, b: usize| significantly_better(&residuals[a], &residuals[b], &rms.2, &tiles);
+        chosen = pick(&cands, &rms.0, &better);
     }
     let scores = HeldOutScores {
         candidates: cands
@@ -394,8 +408,9 @@ pub(super) fn choose(
     Ok((cands[chosen], scores))
 }
 
-/// Every candidate's RMS over the residuals that all of them have, and their number.
-fn common_rms(residuals: &[Vec<f32>]) -> (Vec<f64>, u64) {
+/// Every candidate's RMS over the residuals that all of them have, their number, and which
+/// they are.
+fn common_rms(residuals: &[Vec<f32>]) -> (Vec<f64>, u64, Vec<bool>) {
     let len = residuals.iter().map(Vec::len).min().unwrap_or(0);
     let common: Vec<bool> = (0..len)
         .map(|j| residuals.iter().all(|r| r[j].is_finite()))
@@ -411,14 +426,37 @@ fn common_rms(residuals: &[Vec<f32>]) -> (Vec<f64>, u64) {
             (ss / n.max(1) as f64).sqrt()
         })
         .collect();
-    (rms, n)
+    (rms, n, common)
 }
+
+/// Whether candidate `a`'s held-out residuals are smaller than `b`'s beyond chance: the mean
+/// of `r_b^2 - r_a^2` over the common residuals exceeds [`SIGNIFICANCE`] standard errors,
+/// clustered by the tiles of `tiles` (one per residual: neighbouring pixels share misfit,
+/// JPEG blocks and misregistration).
+fn significantly_better(a: &[f32], b: &[f32], common: &[bool], tiles: &[u32]) -> bool {
+    let idx = || (0..common.len()).filter(|&j| common[j]);
+    let n = idx().count();
+    if n < 2 {
+        return false;
+    }
+    let d = |j: usize| f64::from(b[j]).powi(2) - f64::from(a[j]).powi(2);
+    let mean = idx().map(d).sum::<f64>() / n as f64;
+    let mut per_tile = std::collections::BTreeMap::<u32, f64>::new();
+    for j in idx() {
+        *per_tile.entry(tiles[j]).or_default() += d(j) - mean;
+    }
+    let var = per_tile.values().map(|v| v * v).sum::<f64>() / (n as f64 * n as f64);
+    mean > SIGNIFICANCE * var.sqrt()
+}
+
+/// Standard errors by which the log-domain fit must predict better than the grey-domain one.
+const SIGNIFICANCE: f64 = 2.0;
 
 /// The choice: the best grey-domain candidate (a weaker prior replaces a stronger one only by
 /// [`WEAKER_PRIOR_MARGIN`]); when the log-domain fit competes, the best of its candidates
-/// replaces it only if it predicts better by [`LOG_MARGIN`] than the same grey-domain
-/// candidate refitted afresh in every fold.
-fn pick(cands: &[Choice], rms: &[f64]) -> usize {
+/// replaces it only if it predicts `better_log(log, cold)` than the same grey-domain candidate
+/// refitted afresh in every fold.
+fn pick(cands: &[Choice], rms: &[f64], better_log: &dyn Fn(usize, usize) -> bool) -> usize {
     let better = |c: usize, than: usize, margin: f64| rms[c] < rms[than] * (1.0 - margin);
     let mut grey: Option<usize> = None;
     let mut cold: Option<usize> = None;
@@ -444,7 +482,7 @@ fn pick(cands: &[Choice], rms: &[f64]) -> usize {
         }
     }
     match (grey, cold, log) {
-        (Some(_), Some(c), Some(l)) if better(l, c, LOG_MARGIN) => l,
+        (Some(_), Some(c), Some(l)) if better(l, c, 0.0) && better_log(l, c) => l,
         (Some(g), _, _) => g,
         (None, _, Some(l)) => l,
         (None, _, None) => 0,
