@@ -56,8 +56,9 @@ combine the sampling error with the sensitivities to the prior and the continuat
 Cameras that tone-map (phones, raw converters, film scans) produce data that no global G
 explains. --estimator auto (the default) also scores Debevec and Malik's least squares on
 ln U (hat weights, every sampled pixel, lambda 3, 10 or 30) on the held-out exposures, and
-takes it when it predicts them at least 2% better than the grey-domain fit refitted afresh
-in every fold; grey or log force one. The printed fit line says which was taken and why.
+takes it when it predicts them better beyond 2 standard errors than the grey-domain fit
+refitted afresh in every fold; grey or log force one. The printed fit line says which was
+taken and every score.
 
 --plot draws U with its 2-sigma band, the standard errors, the observations, and the noise
 variance measured from the residuals beside the shot/read/ADC model fitted to it.")]
@@ -136,7 +137,7 @@ pub struct ResponseArgs {
         "The estimator: grey (maximum likelihood in grey values under the camera's noise, \
          with clipping as censoring), log (Debevec and Malik's least squares on ln U with hat \
          weights, for tone-mapping cameras), or auto: grey unless log predicts held-out \
-         exposures clearly better",
+         exposures better beyond chance",
         "auto",
     ))]
     pub estimator: Option<photometric::Estimator>,

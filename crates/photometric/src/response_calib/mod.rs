@@ -19,6 +19,11 @@
 //!   (the frames of each fold of exposures are predicted from the fit without them), so the
 //!   weights are never worse than uniform ones on data that does not follow any noise model.
 //!   The shot/read/ADC model is fitted to the measurement to describe it, never to weight.
+//! * **Cameras that tone-map.** Phones, raw converters and film record data that no global
+//!   `G` explains; there the grey-domain fit can leave a plateau in `U` that no prediction
+//!   visits. The held-out check also scores Debevec and Malik's least squares on `ln U` (hat
+//!   weights, every sampled pixel; `logfit`) and takes it only when it predicts the held-out
+//!   exposures better beyond 2 standard errors than the grey-domain fit refitted afresh.
 //! * **Outliers pull with bounded force** (Huber beyond 3 standard deviations): moving
 //!   people and cars, misregistered edges, hot pixels.
 //! * **Newton steps on the profiled problem**: a step for every pixel's `B'`, then a
@@ -106,7 +111,7 @@ pub struct ResponseOptions {
     /// Most pixels drawn (0: every pixel if the standard errors need them).
     pub max_pixels: usize,
     /// The estimator: `auto` (the grey-domain maximum likelihood unless the log-domain fit
-    /// predicts held-out exposures clearly better), `grey` or `log`.
+    /// predicts held-out exposures better beyond chance), `grey` or `log`.
     pub estimator: Estimator,
 }
 

@@ -84,7 +84,7 @@ pub enum Weighting {
 #[serde(rename_all = "lowercase")]
 pub enum Estimator {
     /// Choose by the predictive score of held-out exposures: the grey-domain fit unless the
-    /// log-domain one predicts them clearly better.
+    /// log-domain one predicts them better beyond chance (2 standard errors).
     #[default]
     Auto,
     /// Maximum likelihood in grey values (the camera's model: noise, clipping, censoring).

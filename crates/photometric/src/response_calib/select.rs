@@ -7,6 +7,11 @@
 //! weights predict the held-out frames better; a weaker prior only when it predicts them
 //! clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
 //! tie keeps the prior the ripples need).
+//!
+//! The log-domain fit (`logfit`) competes too: its candidates are refitted from scratch in
+//! every fold, and so is the chosen grey-domain candidate for the comparison (its fold fits
+//! above start from the fit on all exposures, which has seen the held-out frames); it is taken
+//! when its residuals are smaller beyond 2 standard errors, clustered by tiles.
 
 use super::logfit;
 use super::model::{Estimator, Forward, Obs};
@@ -486,5 +491,35 @@ fn pick(cands: &[Choice], rms: &[f64], better_log: &dyn Fn(usize, usize) -> bool
         (Some(g), _, _) => g,
         (None, _, Some(l)) => l,
         (None, _, None) => 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::significantly_better;
+
+    /// Residuals of 400 observations in 40 tiles, a pseudo-random pattern.
+    fn residuals(scale: f32, phase: u32) -> Vec<f32> {
+        (0..400u32)
+            .map(|j| scale * (((j * 7919 + phase) % 101) as f32 / 50.0 - 1.0))
+            .collect()
+    }
+
+    #[test]
+    fn only_a_clear_improvement_counts() {
+        let tiles: Vec<u32> = (0..400).map(|j| j / 10).collect();
+        let all = vec![true; 400];
+        let a = residuals(1.0, 3);
+        // the same residuals: no improvement, in either direction
+        assert!(!significantly_better(&a, &a, &all, &tiles));
+        // half the size everywhere: better, and not the other way round
+        let half = residuals(0.5, 3);
+        assert!(significantly_better(&half, &a, &all, &tiles));
+        assert!(!significantly_better(&a, &half, &all, &tiles));
+        // 1% smaller on other residuals of the same spread: within chance
+        let other = residuals(0.99, 57);
+        assert!(!significantly_better(&other, &a, &all, &tiles));
+        // nothing in common: no evidence
+        assert!(!significantly_better(&half, &a, &[false; 400], &tiles));
     }
 }
