@@ -8,7 +8,7 @@ use anyhow::Result;
 use camera_model::Image;
 use synthetic::camera::ResponseCurve;
 use synthetic::scene::{Sweep, SweepConfig};
-use synthetic::sensor::{NoiseLevel, Sensor};
+use synthetic::sensor::{NoiseLevel, Sensor, SensorFamily};
 
 use crate::stages::{peak_rss_mb, reset_peak_rss};
 use crate::Figure;
@@ -87,25 +87,57 @@ pub fn run(
     })
 }
 
-/// The configurations: every noise level lossless, and typical and high with JPEG 90.
-fn configs(quick: bool) -> Vec<(String, Sensor)> {
-    let mut v: Vec<(String, Sensor)> = NoiseLevel::ALL
-        .iter()
-        .map(|l| (l.name().to_string(), Sensor::preset(*l)))
-        .collect();
-    v.push((
-        "typical_jpeg".into(),
-        Sensor::preset(NoiseLevel::Typical).with_jpeg(90),
-    ));
-    v.push((
-        "high_jpeg".into(),
-        Sensor::preset(NoiseLevel::High).with_jpeg(90),
-    ));
+/// One configuration of the stage: its name, the sensor, the response and whether the
+/// frames are JPEG (then the options of a JPEG sequence: clipped blocks dropped).
+struct Config {
+    name: String,
+    sensor: Sensor,
+    curve: ResponseCurve,
+    jpeg: bool,
+}
+
+/// The configurations: both sensor families at every noise level, lossless, and typical and
+/// high with JPEG 90. The machine family renders the dataset's response; the gain family
+/// (photon noise before the response at a fixed gain, a small ADC noise after it) renders
+/// measured camera curves of the DoRF database, a different one per level.
+fn configs(quick: bool) -> Vec<Config> {
+    let mut v = Vec::new();
+    for family in SensorFamily::ALL {
+        for (k, level) in NoiseLevel::ALL.iter().enumerate() {
+            let curve = match family {
+                SensorFamily::Machine => ResponseCurve::Dataset,
+                SensorFamily::Gain => ResponseCurve::Dorf(DORF_PER_LEVEL[k]),
+            };
+            let prefix = match family {
+                SensorFamily::Machine => String::new(),
+                SensorFamily::Gain => "gain_".to_string(),
+            };
+            let sensor = family.preset(*level);
+            v.push(Config {
+                name: format!("{prefix}{}", level.name()),
+                sensor,
+                curve,
+                jpeg: false,
+            });
+            if *level != NoiseLevel::Low {
+                v.push(Config {
+                    name: format!("{prefix}{}_jpeg", level.name()),
+                    sensor: sensor.with_jpeg(90),
+                    curve,
+                    jpeg: true,
+                });
+            }
+        }
+    }
     if quick {
-        v.retain(|(n, _)| n == "low" || n == "high_jpeg");
+        v.retain(|c| ["low", "high_jpeg", "gain_high"].contains(&c.name.as_str()));
     }
     v
 }
+
+/// The DoRF curve of the gain family at each noise level (low, typical, high): a dark, a
+/// middle and a bright curve of the subset.
+const DORF_PER_LEVEL: [u8; 3] = [3, 8, 12];
 
 /// The stage.
 pub fn stage(quick: bool) -> Result<Vec<Figure>> {
@@ -117,14 +149,25 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
         (1280, 1024, 120)
     };
     let mut figures = Vec::new();
-    let mut within = (0usize, 0usize);
+    // the standard errors' coverage of each family: [machine, gain]
+    let mut within = [(0usize, 0usize); 2];
     println!(
         "  {:<14} {:>16} {:>8} {:>8} {:>6} {:>5} {:>7} {:>8}",
         "sensor", "sweep", "max", "rms", "s", "it", "MB", "in 2sd"
     );
-    for (name, sensor) in configs(quick) {
+    for Config {
+        name,
+        sensor,
+        curve,
+        jpeg,
+    } in configs(quick)
+    {
+        let mut opts = opts.clone();
+        if jpeg {
+            opts.saturation_block = 8;
+        }
         for (sw, sh, sn, big) in [(w, h, n, true), (320, 256, 12, false)] {
-            let r = run(7, sw, sh, sn, sensor, ResponseCurve::Dataset, &opts)?;
+            let r = run(7, sw, sh, sn, sensor, curve, &opts)?;
             println!(
                 "  {name:<14} {:>16} {:>8.3} {:>8.3} {:>6.1} {:>5} {:>7.0} {:>4}/{:<3}",
                 format!("{sw}x{sh}x{sn}"),
@@ -136,8 +179,9 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
                 r.within_2sigma.0,
                 r.within_2sigma.1
             );
-            within.0 += r.within_2sigma.0;
-            within.1 += r.within_2sigma.1;
+            let f = usize::from(name.starts_with("gain_"));
+            within[f].0 += r.within_2sigma.0;
+            within[f].1 += r.within_2sigma.1;
             if big {
                 figures.push(Figure::lower(
                     &format!("response.{name}.max_error"),
@@ -174,9 +218,9 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
             }
         }
     }
-    let frac = within.0 as f64 / within.1.max(1) as f64;
+    let frac = within[0].0 as f64 / within[0].1.max(1) as f64;
     println!(
-        "  standard errors: {:.1}% of the true errors within 2 sigma",
+        "  standard errors, machine family: {:.1}% of the true errors within 2 sigma",
         frac * 100.0
     );
     figures.push(Figure {
@@ -185,6 +229,19 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
         unit: "",
         lower_is_better: false,
     });
+    if within[1].1 > 0 {
+        let gain = within[1].0 as f64 / within[1].1 as f64;
+        println!(
+            "  standard errors, gain family: {:.1}% of the true errors within 2 sigma",
+            gain * 100.0
+        );
+        figures.push(Figure {
+            key: "response.gain.within_2sigma".into(),
+            value: gain,
+            unit: "",
+            lower_is_better: false,
+        });
+    }
     figures.push(Figure::lower("response.within_2sigma_excess", frac, ""));
     Ok(figures)
 }

@@ -41,7 +41,8 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
         .map(|t| t.parse().unwrap())
         .collect();
     assert_eq!(sd.len(), 256);
-    assert!(sd[..255].iter().all(|s| *s > 0.0) && sd[255] == 0.0);
+    // U(0) = 0 and U(255) = 255 are held
+    assert!(sd[1..255].iter().all(|s| *s > 0.0) && sd[0] == 0.0 && sd[255] == 0.0);
     let got =
         photometric::InverseResponse::parse(&std::fs::read_to_string(&pcalib).unwrap()).unwrap();
     let truth = photometric::InverseResponse::parse(
@@ -430,12 +431,7 @@ fn absurd_calibration_options_are_refused_before_any_work() {
             "saturation_border",
         ),
         ("response", "", Some(["--tolerance", "nan"]), "tolerance"),
-        (
-            "response",
-            "[response]\ncensor_sigmas = inf\n",
-            None,
-            "censor_sigmas",
-        ),
+        ("response", "[response]\nhuber = inf\n", None, "huber"),
     ] {
         let cfg = d.join("options.toml");
         std::fs::write(&cfg, config).unwrap();

@@ -45,7 +45,8 @@ pub use error::PhotometricError;
 pub use noise::NoiseModel;
 pub use response::InverseResponse;
 pub use response_calib::{
-    calibrate_response, calibrate_response_deep, ResponseCalibration, ResponseOptions, MAX_KNOTS,
+    calibrate_response, calibrate_response_deep, CandidateScore, HeldOutScores, NoiseBin,
+    ResponseCalibration, ResponseOptions, Weighting, DEFAULT_MAX_PIXELS, MAX_KNOTS,
 };
 pub use smoothing::SmoothingChoice;
 pub use vignette::{vignette_errors, Vignette};

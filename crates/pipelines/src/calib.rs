@@ -994,6 +994,11 @@ pub fn calibrate_response_sequence(
             "iteration {i}, U changed by {change:.4} grey values"
         ));
     };
+    // JPEG frames: a clipped pixel rings through its 8x8 block
+    let mut options = job.options.clone();
+    if seq.is_jpeg() {
+        options.saturation_block = options.saturation_block.max(8);
+    }
     let run = if seq.bits_per_sample() == 16 {
         let (frames, exposures, bits) = load_exposed_deep_frames(&seq, job.bit_depth, observer)?;
         let report = format!(
@@ -1002,8 +1007,7 @@ pub fn calibrate_response_sequence(
             (1usize << bits).min(photometric::MAX_KNOTS),
             1u32 << bits
         );
-        let cal =
-            photometric::calibrate_response_deep(&frames, bits, &exposures, &job.options, &tick);
+        let cal = photometric::calibrate_response_deep(&frames, bits, &exposures, &options, &tick);
         observer.finish();
         ResponseRun {
             cal: cal.with_context(context)?,
@@ -1019,7 +1023,7 @@ pub fn calibrate_response_sequence(
         }
         let (mut frames, exposures) = load_exposed_frames(&seq, observer)?;
         let report = sweep_report(&frames, 255, &exposures);
-        let cal = photometric::calibrate_response(&mut frames, &exposures, &job.options, &tick);
+        let cal = photometric::calibrate_response(&mut frames, &exposures, &options, &tick);
         observer.finish();
         ResponseRun {
             cal: cal.with_context(context)?,

@@ -22,13 +22,15 @@ use rayon::prelude::*;
 use synthetic::camera::{FovCamera, ResponseCurve};
 use synthetic::results::{run_text, sequence_name, sequence_path, ResultsConfig};
 use synthetic::scene::ExposureMode;
-use synthetic::sensor::{NoiseLevel, Sensor};
+use synthetic::sensor::{NoiseLevel, Sensor, SensorFamily};
 
 use crate::{Observer, PipelineError, Result};
 
 /// The synthetic camera's sensor, response and storage.
 #[derive(Clone, Copy, Debug)]
 pub struct SensorSpec {
+    /// The family of sensors.
+    pub family: SensorFamily,
     /// Noise level of the sensor.
     pub noise: NoiseLevel,
     /// The true camera response.
@@ -41,6 +43,7 @@ impl Default for SensorSpec {
     /// Typical noise, the dataset-like response, JPEG 90 (about the dataset's quality).
     fn default() -> Self {
         SensorSpec {
+            family: SensorFamily::Machine,
             noise: NoiseLevel::Typical,
             response: ResponseCurve::Dataset,
             jpeg_quality: Some(90),
@@ -51,7 +54,7 @@ impl Default for SensorSpec {
 impl SensorSpec {
     /// The sensor this describes.
     pub fn sensor(&self) -> Sensor {
-        let s = Sensor::preset(self.noise);
+        let s = self.family.preset(self.noise);
         match self.jpeg_quality {
             Some(q) => s.with_jpeg(q),
             None => s,

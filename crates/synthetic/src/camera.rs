@@ -166,6 +166,40 @@ pub enum ResponseCurve {
     Knee,
     /// A pure power `U(x) = x^gamma`.
     Gamma(f64),
+    /// A real camera's or film's measured response: curve `i` (0 to [`DORF_CURVES`] - 1) of
+    /// the subset of the DoRF database in `data/dorf.txt` (Grossberg and Nayar, "Modeling
+    /// the space of camera response functions", PAMI 2004), ordered from expansive to
+    /// strongly compressive.
+    Dorf(u8),
+}
+
+/// How many DoRF curves [`ResponseCurve::Dorf`] offers.
+pub const DORF_CURVES: usize = 16;
+
+/// The DoRF subset: per curve the brightness at the irradiances `i / 1023`.
+fn dorf_curves() -> &'static [Vec<f64>] {
+    static CURVES: std::sync::OnceLock<Vec<Vec<f64>>> = std::sync::OnceLock::new();
+    CURVES.get_or_init(|| {
+        include_str!("../data/dorf.txt")
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+            .map(|l| {
+                l.split_whitespace()
+                    .skip(1)
+                    .map(|v| v.parse::<f64>().unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .collect()
+    })
+}
+
+/// The irradiance at which a sampled, strictly increasing brightness curve reaches `x`.
+fn invert_sampled(b: &[f64], x: f64) -> f64 {
+    let n = b.len();
+    let k = b.partition_point(|&v| v < x).clamp(1, n - 1);
+    let (b0, b1) = (b[k - 1], b[k]);
+    let f = if b1 > b0 { (x - b0) / (b1 - b0) } else { 0.0 };
+    ((k - 1) as f64 + f.clamp(0.0, 1.0)) / (n - 1) as f64
 }
 
 impl ResponseCurve {
@@ -200,6 +234,9 @@ impl ResponseCurve {
                 x + 2.2 * k * k
             }
             ResponseCurve::Gamma(g) => x.powf(g.max(0.05)),
+            ResponseCurve::Dorf(i) => dorf_curves()
+                .get(i as usize)
+                .map_or(x, |b| invert_sampled(b, x)),
         };
         raw(x) / raw(1.0)
     }
@@ -230,6 +267,7 @@ impl ResponseCurve {
             ResponseCurve::Log => "log".into(),
             ResponseCurve::Knee => "knee".into(),
             ResponseCurve::Gamma(g) => format!("gamma{g}"),
+            ResponseCurve::Dorf(i) => format!("dorf{i}"),
         }
     }
 }
@@ -243,7 +281,7 @@ impl fmt::Display for ResponseCurve {
 impl FromStr for ResponseCurve {
     type Err = String;
 
-    /// `dataset`, `srgb`, `log`, `knee` or `gammaG` (for example `gamma2.2`).
+    /// `dataset`, `srgb`, `log`, `knee`, `gammaG` (for example `gamma2.2`) or `dorfN`.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let t = s.trim().to_ascii_lowercase();
         match t.as_str() {
@@ -251,11 +289,18 @@ impl FromStr for ResponseCurve {
             "srgb" => Ok(ResponseCurve::Srgb),
             "log" => Ok(ResponseCurve::Log),
             "knee" => Ok(ResponseCurve::Knee),
-            _ => match t.strip_prefix("gamma").map(str::parse::<f64>) {
-                Some(Ok(g)) if g.is_finite() && g > 0.05 && g < 20.0 => Ok(ResponseCurve::Gamma(g)),
+            _ => match (
+                t.strip_prefix("gamma").map(str::parse::<f64>),
+                t.strip_prefix("dorf").map(str::parse::<u8>),
+            ) {
+                (Some(Ok(g)), _) if g.is_finite() && g > 0.05 && g < 20.0 => {
+                    Ok(ResponseCurve::Gamma(g))
+                }
+                (_, Some(Ok(i))) if (i as usize) < DORF_CURVES => Ok(ResponseCurve::Dorf(i)),
                 _ => Err(format!(
-                    "unknown response curve `{}`: expected dataset, srgb, log, knee or gammaG (for example gamma2.2)",
-                    s.trim()
+                    "unknown response curve `{}`: expected dataset, srgb, log, knee, gammaG (for example gamma2.2) or dorfN (a measured camera response, N from 0 to {})",
+                    s.trim(),
+                    DORF_CURVES - 1
                 )),
             },
         }

@@ -356,7 +356,7 @@ pub(super) fn targets(root: &Path) -> Result<Vec<Target>> {
                     b"[vignette]\nsmoothing_px = 2.0\ngrid = 200\n".to_vec(),
                     b"[response]\nmax_iterations = 20\ntolerance = 0.1\nsaturation_border = 0\n"
                         .to_vec(),
-                    b"response = { smoothness = 3.0, censor_sigmas = 2.5 }\n".to_vec(),
+                    b"response = { smoothness = 3.0, huber = 2.5, weighting = \"uniform\" }\n".to_vec(),
                 ]
             },
             text: true,

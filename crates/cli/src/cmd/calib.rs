@@ -36,18 +36,25 @@ and times.txt with the exposure of every frame.
 Writes pcalib.txt (U scaled to U(255) = 255, strictly increasing, as DSO reads it) and
 pcalib_std.txt beside it (one line of 256 standard errors on the same scale).
 
-The model is the paper's, I = G(t B') + noise with G = U^-1, fitted where the noise is: in
-grey values, each observation weighted by its noise (shot, read and ADC noise, fitted to the
-residuals), with Newton steps in which each pixel's B' is eliminated. Observations enter by
-the model's prediction, never by their observed value: only where the predicted grey value is
---censor-sigmas noise standard deviations inside 0..255, so saturation does not bias the
-bright values. Saturated pixels and a --saturation-border around them are dropped. Exposures
-in constant ratios leave U undetermined up to ripples with the period of the ratio; a
-third-difference prior removes them, smoothing over --smoothness grey values or more when the
-ratio is large, and continues U to the few values the data leave out (the top is continued
-as a quadratic in log U). The standard errors combine the sampling error with the
-sensitivities to the prior and to the selection; on synthetic sweeps about 93% of the true
-errors lie within two of them.")]
+The model is the paper's, I = G(t B') + noise with G = U^-1, fitted by maximum likelihood
+in grey values, with Newton steps in which each pixel's B' is eliminated:
+  - saturated values (and values at 0) are censored observations: they enter through the
+    probability that the noisy value clipped, so U is determined up to the top wherever long
+    exposures saturate; only a --saturation-border around saturated pixels is dropped;
+  - the noise variance per predicted grey value is measured from the residuals; --weighting
+    auto (the default) weights by it unless uniform weights predict held-out exposures
+    better (the choice and both scores are printed), measured or uniform force one;
+  - residuals beyond --huber standard deviations pull with bounded force (moving objects,
+    misregistration, hot pixels);
+  - pixels are drawn at random until the sampling standard error of every determined U(k)
+    is below --target-std-error grey values (or all are in; --max-pixels caps the draw).
+Exposures in constant ratios leave U undetermined up to ripples with the period of the
+ratio; a third-difference prior removes them, smoothing over --smoothness grey values or
+more when the ratio is large, and continues U where the data end. The standard errors
+combine the sampling error with the sensitivities to the prior and the continuation.
+
+--plot draws U with its 2-sigma band, the standard errors, the observations, and the noise
+variance measured from the residuals beside the shot/read/ADC model fitted to it.")]
     Response(ResponseArgs),
     /// A dense vignette map (vignette.png) from a video of a bright planar wall with one
     /// printed ArUco marker (original dictionary) that gives the plane's pose, with the
@@ -118,14 +125,33 @@ pub struct ResponseArgs {
         ResponseOptions::default().smoothness,
     ))]
     pub smoothness: Option<f64>,
-    /// Observations enter only where the model predicts a grey value this many noise
-    /// standard deviations inside 0..255.
-    #[arg(long, value_name = "SIGMAS", help = with_default(
-        "Observations enter only where the model predicts a grey value this many noise \
-         standard deviations inside 0..255",
-        ResponseOptions::default().censor_sigmas,
+    /// How observations are weighted: auto, measured or uniform.
+    #[arg(long, value_name = "HOW", value_parser = parse_weighting, help = with_default(
+        "How observations are weighted: by the noise measured from the residuals \
+         (measured), alike (uniform), or auto: measured unless uniform weights predict \
+         held-out exposures better",
+        "auto",
     ))]
-    pub censor_sigmas: Option<f64>,
+    pub weighting: Option<photometric::Weighting>,
+    /// Residuals beyond this many standard deviations pull with bounded force (Huber).
+    #[arg(long, value_name = "SIGMAS", help = with_default(
+        "Residuals beyond this many noise standard deviations pull with bounded force (Huber)",
+        ResponseOptions::default().huber,
+    ))]
+    pub huber: Option<f64>,
+    /// The pixel draw grows until the sampling standard error of U is below this.
+    #[arg(long, value_name = "GREY", help = with_default(
+        "Pixels are drawn until the sampling standard error of every determined U(k) is \
+         below this many grey values",
+        ResponseOptions::default().target_std_error,
+    ))]
+    pub target_std_error: Option<f64>,
+    /// Most pixels drawn (0: no limit).
+    #[arg(long, value_name = "N", help = with_default(
+        "Most pixels drawn (0: all if the standard errors need them)",
+        ResponseOptions::default().max_pixels,
+    ))]
+    pub max_pixels: Option<usize>,
     /// Radius (pixels) dropped around saturated pixels.
     #[arg(long, value_name = "PX", help = with_default(
         "Radius (pixels) dropped around saturated pixels",
@@ -205,6 +231,16 @@ pub struct VignetteArgs {
     pub json: bool,
 }
 
+/// `--weighting`'s values.
+fn parse_weighting(s: &str) -> Result<photometric::Weighting, String> {
+    match s {
+        "auto" => Ok(photometric::Weighting::Auto),
+        "measured" => Ok(photometric::Weighting::Measured),
+        "uniform" => Ok(photometric::Weighting::Uniform),
+        other => Err(format!("`{other}`: expected auto, measured or uniform")),
+    }
+}
+
 /// A flag's help with the default it takes when neither the flag nor `--config` sets it.
 fn with_default(text: &str, default: impl std::fmt::Display) -> String {
     format!("{text} [default: {default}, or from --config]")
@@ -223,15 +259,23 @@ pub fn response_options(a: &ResponseArgs) -> Result<ResponseOptions> {
     if let Some(v) = a.smoothness {
         o.smoothness = v;
     }
-    if let Some(v) = a.censor_sigmas {
-        o.censor_sigmas = v;
+    if let Some(v) = a.weighting {
+        o.weighting = v;
+    }
+    if let Some(v) = a.huber {
+        o.huber = v;
+    }
+    if let Some(v) = a.target_std_error {
+        o.target_std_error = v;
+    }
+    if let Some(v) = a.max_pixels {
+        o.max_pixels = v;
     }
     if let Some(v) = a.saturation_border {
         o.saturation_border = v;
     }
     o.max_iterations = o.max_iterations.max(1);
     o.smoothness = o.smoothness.max(0.0);
-    o.censor_sigmas = o.censor_sigmas.max(0.5);
     o.check()
         .with_context(|| options_source(a.config.as_deref()))?;
     Ok(o)
@@ -321,10 +365,15 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "observed_min": cal.observed_range.0,
                 "observed_max": cal.observed_range.1,
                 "filled": cal.filled,
-                "censor_range": [cal.censor_range.0, cal.censor_range.1],
-                "noise": {"read": cal.noise.read, "shot": cal.noise.shot, "adc": cal.noise.adc},
+                "weighting": cal.weighting,
+                "held_out": cal.held_out,
+                "prior_scale": cal.prior_scale,
+                "measured_noise": cal.measured_noise,
+                "noise": cal.noise,
                 "prior_weight": cal.prior_weight,
-                "pixels_used": cal.pixels_used,
+                "pixels_sampled": cal.pixels_sampled,
+                "pixels_available": cal.pixels_available,
+                "sampling_error": cal.sampling_error,
                 "u": cal.response.table(),
                 "std_error": cal.std_error,
                 "systematic_error": cal.systematic_error,
@@ -344,12 +393,14 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
             cal.change.last().copied().unwrap_or(f64::NAN),
             cal.rmse
         )?;
+        outln!("{}", weighting_line(&cal))?;
+        outln!("{}", noise_line(&cal))?;
         outln!(
-            "noise: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2; observations used where the prediction is {:.0}..{:.0}",
-            cal.noise.read, cal.noise.shot, cal.noise.adc, cal.censor_range.0, cal.censor_range.1
+            "pixels: {} of the {} with two unsaturated values drawn; RMS sampling standard error of U {:.3} grey values",
+            cal.pixels_sampled, cal.pixels_available, cal.sampling_error
         )?;
         outln!(
-            "U determined by the data for grey values {}..{}; {} value(s) continued by the prior; largest standard error {:.3} grey values",
+            "U determined by the data for grey values {}..{}; {} value(s) continued beyond them; largest standard error {:.3} grey values",
             cal.observed_range.0,
             cal.observed_range.1,
             cal.filled.len(),
@@ -358,6 +409,65 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         outln!("wrote {} and {}", a.output.display(), std_path.display())?;
     }
     Ok(())
+}
+
+/// The weights and prior used, and the held-out check that chose them.
+fn weighting_line(cal: &photometric::ResponseCalibration) -> String {
+    let what = format!(
+        "{} weights, prior x{}",
+        match cal.weighting {
+            photometric::Weighting::Uniform => "uniform",
+            _ => "measured-noise",
+        },
+        cal.prior_scale
+    );
+    match &cal.held_out {
+        Some(h) => {
+            let scores: Vec<String> = h
+                .candidates
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} x{} {:.3}",
+                        if c.measured { "measured" } else { "uniform" },
+                        c.prior_scale,
+                        c.rms
+                    )
+                })
+                .collect();
+            format!(
+                "fit: {what}, chosen by predicting held-out exposures ({} folds, {} pixels; RMS error in grey values: {})",
+                h.folds,
+                h.pixels,
+                scores.join(", ")
+            )
+        }
+        None => format!("fit: {what} (as asked)"),
+    }
+}
+
+/// The noise measured from the residuals, and the model fitted to it.
+fn noise_line(cal: &photometric::ResponseCalibration) -> String {
+    let sds: Vec<(f64, f64)> = cal
+        .measured_noise
+        .iter()
+        .filter(|b| b.variance.is_finite())
+        .map(|b| (b.grey, b.variance.sqrt()))
+        .collect();
+    let range = match (sds.first(), sds.last()) {
+        (Some(a), Some(b)) => format!(
+            "standard deviation {:.2} at grey value {:.0} to {:.2} at {:.0}",
+            a.1, a.0, b.1, b.0
+        ),
+        _ => "not measured".into(),
+    };
+    match &cal.noise {
+        Some(m) => format!(
+            "noise measured from the residuals: {range}; shot/read/ADC model fitted to it: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2",
+            m.read, m.shot, m.adc
+        ),
+        None => format!("noise measured from the residuals: {range}"),
+    }
 }
 
 /// The library's vignette job for these arguments (options from flags and `--config`).

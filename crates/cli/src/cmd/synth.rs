@@ -65,8 +65,14 @@ pub struct SensorArgs {
     /// full-well and 8-bit saturation, and hot and dead pixels.
     #[arg(long, default_value = "typical", value_name = "LEVEL")]
     pub noise: synthetic::sensor::NoiseLevel,
-    /// The true camera response: dataset (toe, linear middle, shoulder), srgb, log, knee or
-    /// gammaG (for example gamma2.2).
+    /// The family of sensors: machine (the levels above) or gain (photon noise at a fixed
+    /// gain of 160, 40 or 10 electrons per U-unit and 0.2, 0.3 or 0.5 grey levels of ADC noise
+    /// for low, typical and high; no read noise, no defects).
+    #[arg(long, default_value = "machine", value_name = "FAMILY")]
+    pub sensor: synthetic::sensor::SensorFamily,
+    /// The true camera response: dataset (toe, linear middle, shoulder), srgb, log, knee,
+    /// gammaG (for example gamma2.2) or dorfN (N from 0 to 15: a real camera's or film's
+    /// measured response from the DoRF database, from expansive to strongly compressive).
     #[arg(long, default_value = "dataset", value_name = "CURVE")]
     pub response: synthetic::camera::ResponseCurve,
     /// JPEG quality of the stored frames (the dataset's are about 90).
@@ -81,6 +87,7 @@ impl SensorArgs {
     /// The library's sensor description.
     pub fn spec(&self) -> SensorSpec {
         SensorSpec {
+            family: self.sensor,
             noise: self.noise,
             response: self.response,
             jpeg_quality: (!self.png).then_some(self.quality),

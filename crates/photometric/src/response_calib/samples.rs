@@ -1,0 +1,261 @@
+//! The observations the calibration works on: a random sample of the pixels, with their
+//! values in every frame, drawn so that a larger sample contains every smaller one.
+
+use camera_model::Image;
+use rayon::prelude::*;
+
+/// Samples of a frame: 8-bit grey values, or `k`-bit values in the low bits of 16-bit ones.
+pub(super) trait Sample: Copy + Send + Sync + 'static {
+    /// The raw value.
+    fn raw(self) -> u32;
+}
+
+impl Sample for u8 {
+    #[inline]
+    fn raw(self) -> u32 {
+        self as u32
+    }
+}
+
+impl Sample for u16 {
+    #[inline]
+    fn raw(self) -> u32 {
+        self as u32
+    }
+}
+
+/// The grey values of the frames and the knots of the estimated table.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Levels {
+    /// The largest grey value, `2^k - 1` (saturation).
+    pub top: u32,
+    /// Values from this one up count as clipped (censored): `top`, or a little below it
+    /// for JPEG frames, whose clipped areas decode to values just under the top.
+    pub clip: u32,
+    /// Number of knots.
+    pub knots: usize,
+    /// Knot position per grey value, `(knots - 1) / top`.
+    pub scale: f64,
+}
+
+impl Levels {
+    pub fn new(bits: u32, max_knots: usize) -> Levels {
+        let top = (1u32 << bits) - 1;
+        let knots = (top as usize + 1).min(max_knots);
+        Levels {
+            top,
+            clip: top,
+            knots,
+            scale: (knots - 1) as f64 / top as f64,
+        }
+    }
+
+    /// The knot position of a grey value.
+    #[inline]
+    pub fn pos(&self, v: u32) -> f64 {
+        v as f64 * self.scale
+    }
+
+    /// The nearest knot of a grey value.
+    #[inline]
+    pub fn knot(&self, v: u32) -> usize {
+        ((v as f64 * self.scale).round() as usize).min(self.knots - 1)
+    }
+}
+
+/// Side of the square tiles whose pixels count as one independent unit in the standard errors
+/// (JPEG blocks and demosaicing correlate neighbouring pixels).
+const TILE: usize = 32;
+
+/// What one scan of the frames tells: the histogram of the values, and the pixels that have
+/// at least two values strictly between 0 and saturation (the others say nothing about `U`),
+/// ordered by their draw.
+pub(super) struct Scan {
+    /// Pixels per grey value over all frames.
+    pub histogram: Vec<u64>,
+    /// The informative pixels, in the order in which samples draw them.
+    pub order: Vec<u32>,
+}
+
+/// A hash of the pixel index: the random, reproducible order of the draw.
+#[inline]
+fn draw_key(p: u32) -> u64 {
+    let mut h = (p as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    h ^ (h >> 31)
+}
+
+/// Rows per chunk of the parallel scans.
+const SCAN_ROWS: usize = 16;
+
+/// Scans the frames once: the histogram and the informative pixels in draw order.
+pub(super) fn scan<T: Sample>(frames: &[Image<T>], top: u32) -> Scan {
+    let (w, h) = frames[0].size();
+    let chunk = SCAN_ROWS * w.max(1);
+    let npx = w * h;
+    let parts: Vec<(Vec<u64>, Vec<u32>)> = (0..npx.div_ceil(chunk))
+        .into_par_iter()
+        .map(|c| {
+            let start = c * chunk;
+            let m = chunk.min(npx - start);
+            let mut count = vec![0u16; m];
+            let mut hist = vec![0u64; top as usize + 1];
+            for f in frames {
+                for (x, &v) in f.data()[start..start + m].iter().enumerate() {
+                    let v = v.raw().min(top);
+                    hist[v as usize] += 1;
+                    count[x] = count[x].saturating_add(u16::from(v > 0 && v < top));
+                }
+            }
+            let keep = (0..m)
+                .filter(|&x| count[x] >= 2)
+                .map(|x| (start + x) as u32)
+                .collect();
+            (hist, keep)
+        })
+        .collect();
+    let mut histogram = vec![0u64; top as usize + 1];
+    let mut order = Vec::new();
+    for (hst, keep) in parts {
+        for (a, b) in histogram.iter_mut().zip(&hst) {
+            *a += b;
+        }
+        order.extend(keep);
+    }
+    order.par_sort_unstable_by_key(|&p| (draw_key(p), p));
+    Scan { histogram, order }
+}
+
+/// The sampled pixels' values, pixel-major (`values[p * frames + i]`), and which of them do
+/// not enter: those next to a saturated pixel of their frame (blooming and the compression's
+/// ringing around clipped highlights), as the paper drops them.
+pub(super) struct Samples {
+    /// Frames per pixel.
+    pub frames: usize,
+    /// The values.
+    pub values: Vec<u16>,
+    /// One bit per value: excluded.
+    pub excluded: Vec<u64>,
+    /// The tile of each sampled pixel (the units of the standard errors).
+    pub tile: Vec<u32>,
+    /// Rank of each sampled pixel in the draw (a smaller sample is the pixels of rank below
+    /// its size).
+    pub rank: Vec<u32>,
+}
+
+impl Samples {
+    /// No pixels.
+    pub fn empty(frames: usize) -> Samples {
+        Samples {
+            frames,
+            values: Vec::new(),
+            excluded: Vec::new(),
+            tile: Vec::new(),
+            rank: Vec::new(),
+        }
+    }
+
+    /// Number of sampled pixels.
+    pub fn len(&self) -> usize {
+        self.tile.len()
+    }
+
+    /// The values of pixel `p`.
+    #[inline]
+    pub fn pixel(&self, p: usize) -> &[u16] {
+        &self.values[p * self.frames..(p + 1) * self.frames]
+    }
+
+    /// Whether the observation `i` of pixel `p` is excluded.
+    #[inline]
+    pub fn is_excluded(&self, p: usize, i: usize) -> bool {
+        let k = p * self.frames + i;
+        self.excluded[k / 64] >> (k % 64) & 1 == 1
+    }
+}
+
+/// The first `n` pixels of the draw (all informative pixels when `n` is larger), their
+/// values ordered by tile, with the observations that have a saturated pixel of the same
+/// frame within `radius` or in the same aligned `block` (JPEG's 8x8; 0: none) excluded (a
+/// saturated value without one stays: it is a censored observation).
+pub(super) fn draw<T: Sample>(
+    frames: &[Image<T>],
+    scan: &Scan,
+    top: u32,
+    radius: usize,
+    block: usize,
+    n: usize,
+) -> Samples {
+    let (w, h) = frames[0].size();
+    let n = n.min(scan.order.len());
+    let tile = tile_size(w, h);
+    let across = w.div_ceil(tile);
+    let tile_of = |p: u32| {
+        let (x, y) = (p as usize % w, p as usize / w);
+        ((y / tile) * across + x / tile) as u32
+    };
+    // ordered by tile, then by pixel: the passes take whole tiles
+    let mut chosen: Vec<(u32, u32)> = scan.order[..n]
+        .iter()
+        .enumerate()
+        .map(|(r, &p)| (p, r as u32))
+        .collect();
+    chosen.sort_unstable_by_key(|&(p, _)| (tile_of(p), p));
+    let nf = frames.len();
+    let mut values = vec![0u16; n * nf];
+    // whole words of the bitset per chunk of 64 pixels
+    let mut excluded = vec![0u64; (n * nf).div_ceil(64)];
+    values
+        .par_chunks_mut(nf * 64)
+        .zip(excluded.par_chunks_mut(nf))
+        .zip(chosen.par_chunks(64))
+        .for_each(|((out, bits), ps)| {
+            for (k, &(p, _)) in ps.iter().enumerate() {
+                let (x, y) = (p as usize % w, p as usize / w);
+                let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
+                let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
+                for (i, f) in frames.iter().enumerate() {
+                    let d = f.data();
+                    let v = d[p as usize].raw().min(top);
+                    // a saturated neighbour excludes the value whatever the value is (also
+                    // when it is saturated itself): excluding only the unsaturated values
+                    // would keep the clipped ones preferentially and bias U near the top
+                    let near = (radius > 0
+                        && (y0..=y1).any(|yy| {
+                            (x0..=x1).any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
+                        }))
+                        || (block > 1 && {
+                            // JPEG codes each block on its own: a clipped pixel rings through
+                            // its whole block
+                            let (bx, by) = (x - x % block, y - y % block);
+                            (by..(by + block).min(h)).any(|yy| {
+                                (bx..(bx + block).min(w))
+                                    .any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
+                            })
+                        });
+                    out[k * nf + i] = v as u16;
+                    if near {
+                        let b = k * nf + i;
+                        bits[b / 64] |= 1 << (b % 64);
+                    }
+                }
+            }
+        });
+    Samples {
+        frames: nf,
+        values,
+        excluded,
+        tile: chosen.iter().map(|&(p, _)| tile_of(p)).collect(),
+        rank: chosen.iter().map(|&(_, r)| r).collect(),
+    }
+}
+
+/// The tile side: [`TILE`], smaller for small frames so that there are at least 64 tiles.
+fn tile_size(w: usize, h: usize) -> usize {
+    let mut t = TILE;
+    while t > 4 && w.div_ceil(t) * h.div_ceil(t) < 64 {
+        t /= 2;
+    }
+    t
+}

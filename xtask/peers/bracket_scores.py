@@ -1,0 +1,279 @@
+#!/usr/bin/env python3
+"""Leave-one-exposure-out scores of response calibrations on real exposure brackets.
+
+For every bracket folder (images/ with 8-bit grey PNGs, times.txt `id timestamp_s
+exposure_ms`) and every distinct exposure e_j: each method calibrates the inverse
+response U on the frames of the other exposures; the frames at e_j are then
+predicted from the others through that U and compared with what the camera
+recorded. No truth is needed: a response that explains the data predicts the
+left-out exposure well.
+
+Methods:
+    monovo      `monovo calib response` (the release build; MONOVO or --monovo)
+    debevec     OpenCV's CalibrateDebevec (samples=70, lambda=10, random=False)
+    robertson   OpenCV's CalibrateRobertson (max_iter=30, threshold=0.01), on
+                GRAY2BGR frames (its tables are hard-wired to 3 channels), channel 0
+    tum2016     the authors' responseCalib (github.com/tum-vision/mono_dataset_code),
+                when --tum2016 BINARY is given (see docs/reference-tools.md)
+
+OpenCV's value at 255 averages over saturated pixels; as in opencv_response.py it
+is replaced by 2 U(254) - U(253). A method whose table is not finite, or that
+fails, scores null on that fold (and the set's score is null).
+
+Scores, per set, pooled over all folds, on the pixels every method scores (the
+left-out value in 1..254 and at least one other frame with a value in 1..254):
+    ls    B = sum t U(I) / sum t^2 over the other frames' values in 1..254 (the
+          paper's least-squares irradiance); RMS of I_j - G(t_j B) in grey levels
+    tri   the same with Debevec's triangle weights h(z) = min(z, 255 - z): B =
+          sum h t U / sum h t^2, and the squared errors weighted by h(I_j)
+G = U^-1 is the piecewise-linear inverse of the table (made non-decreasing first),
+clamped to 0..255.
+
+Run (numbers committed in tests/fixtures/brackets/peer_scores.json):
+    python3 -m venv venv && venv/bin/pip install opencv-python-headless numpy
+    venv/bin/python xtask/peers/bracket_scores.py tests/fixtures/brackets/*/ \
+        --monovo target/release/monovo [--tum2016 PATH/responseCalib] \
+        --json tests/fixtures/brackets/peer_scores.json
+"""
+import argparse
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import cv2
+import numpy as np
+
+IMAGE_EXT = (".png", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff")
+
+
+def load_set(folder):
+    d = os.path.join(folder, "images")
+    names = sorted(f for f in os.listdir(d) if f.lower().endswith(IMAGE_EXT))
+    frames = [cv2.imread(os.path.join(d, n), cv2.IMREAD_GRAYSCALE) for n in names]
+    if not frames or any(f is None for f in frames):
+        sys.exit(f"{folder}: no images, or an image failed to decode")
+    times = []
+    with open(os.path.join(folder, "times.txt")) as fh:
+        for lineno, line in enumerate(fh, 1):
+            cols = line.split()
+            if not cols or cols[0].startswith("#"):
+                continue
+            if len(cols) < 3:
+                sys.exit(f"{folder}/times.txt:{lineno}: expected `id timestamp_s exposure_ms`")
+            times.append(float(cols[2]))
+    if len(times) != len(frames):
+        sys.exit(f"{folder}: {len(frames)} images but {len(times)} exposures")
+    return names, frames, np.asarray(times, np.float64)
+
+
+def groups(times):
+    """Distinct exposures (relative tolerance 1e-6) and the frame indices of each."""
+    order = np.argsort(times, kind="stable")
+    out = []
+    for i in order:
+        if out and abs(times[i] / out[-1][0] - 1.0) < 1e-6:
+            out[-1][1].append(int(i))
+        else:
+            out.append((float(times[i]), [int(i)]))
+    return out
+
+
+def finite_table(u):
+    u = np.asarray(u, np.float64).reshape(256, -1)[:, 0].copy()
+    ok = np.isfinite(u)
+    if ok.sum() < 3:
+        return None
+    if not ok.all():
+        k = np.arange(256)
+        u[~ok] = np.interp(k[~ok], k[ok], u[ok])
+    return u
+
+
+def opencv_table(table):
+    u = finite_table(table)
+    if u is None:
+        return None
+    u[255] = 2 * u[254] - u[253]
+    return u
+
+
+def write_subset(folder, names, frames, times, keep, camera=True):
+    os.makedirs(os.path.join(folder, "images"))
+    with open(os.path.join(folder, "times.txt"), "w") as fh:
+        for j, i in enumerate(keep):
+            cv2.imwrite(os.path.join(folder, "images", f"{j:05d}.png"), frames[i])
+            fh.write(f"{j} {j} {float(times[i])!r}\n")
+    if camera:
+        h, w = frames[0].shape
+        # a camera.txt for the authors' reader (it builds an undistorter; the
+        # response calibration reads the raw frames)
+        with open(os.path.join(folder, "camera.txt"), "w") as fh:
+            fh.write("0.5 0.5 0.5 0.5 0.9\n")
+            fh.write(f"{w} {h}\ncrop\n{w} {h}\n")
+
+
+def run_monovo(binary, folder, work, extra=""):
+    out = os.path.join(work, "monovo_pcalib.txt")
+    r = subprocess.run([binary, "calib", "response", folder, "-o", out, "--force", "--json"]
+                       + extra.split(), capture_output=True, text=True)
+    if r.returncode != 0:
+        return None, r.stderr.strip().splitlines()[-1:] if r.stderr else ["failed"]
+    return np.array(open(out).read().split(), np.float64), None
+
+
+def run_tum2016(binary, folder, work):
+    cwd = os.path.join(work, "tum2016")
+    os.makedirs(cwd)
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
+    try:
+        r = subprocess.run([binary, folder.rstrip("/") + "/"], cwd=cwd, capture_output=True,
+                           text=True, env=env, timeout=600)
+    except subprocess.TimeoutExpired:
+        return None, ["timeout"]
+    path = os.path.join(cwd, "photoCalibResult", "pcalib.txt")
+    if r.returncode != 0 or not os.path.exists(path):
+        return None, [f"exit {r.returncode}"]
+    raw = np.array(open(path).read().split(), np.float64)
+    if raw.size != 256 or not np.isfinite(raw).all():
+        return None, ["non-finite table"]
+    return raw, None
+
+
+def inverse(u, e):
+    """G(e): the fractional code where the (non-decreasing) table reaches e."""
+    m = np.maximum.accumulate(u)
+    return np.clip(np.interp(e, m, np.arange(256, dtype=np.float64)), 0.0, 255.0)
+
+
+def fold_errors(frames, times, train, test, u):
+    """(sse_ls, n_ls, sse_tri, wsum_tri) of one fold."""
+    stack = np.stack([frames[i] for i in train]).astype(np.int32)
+    t = np.array([times[i] for i in train])[:, None, None]
+    ok = (stack >= 1) & (stack <= 254)
+    uv = u[stack]
+    h = np.minimum(stack, 255 - stack).astype(np.float64) * ok
+    okf = ok.astype(np.float64)
+    num_ls = (okf * t * uv).sum(0)
+    den_ls = (okf * t * t).sum(0)
+    num_tri = (h * t * uv).sum(0)
+    den_tri = (h * t * t).sum(0)
+    has = ok.any(0)
+    out = [0.0, 0, 0.0, 0.0]
+    for j in test:
+        obs = frames[j].astype(np.float64)
+        mask = has & (frames[j] >= 1) & (frames[j] <= 254)
+        b_ls = num_ls[mask] / den_ls[mask]
+        b_tri = num_tri[mask] / den_tri[mask]
+        o = obs[mask]
+        r_ls = o - inverse(u, times[j] * b_ls)
+        r_tri = o - inverse(u, times[j] * b_tri)
+        w = np.minimum(o, 255 - o)
+        out[0] += float(r_ls @ r_ls)
+        out[1] += int(mask.sum())
+        out[2] += float((w * r_tri) @ r_tri)
+        out[3] += float(w.sum())
+    return out
+
+
+def peers(us, frames, times, train, sub, work, args):
+    """The peers' tables on the training frames."""
+    grey = [frames[i] for i in train]
+    tt = np.array([times[i] / 1000.0 for i in train], np.float32)
+    deb = cv2.createCalibrateDebevec(samples=70, lambda_=10.0, random=False)
+    us["debevec"] = (opencv_table(deb.process(grey, tt)), None)
+    rob = cv2.createCalibrateRobertson(max_iter=30, threshold=0.01)
+    bgr = [cv2.cvtColor(f, cv2.COLOR_GRAY2BGR) for f in grey]
+    us["robertson"] = (opencv_table(rob.process(bgr, tt)), None)
+    if args.tum2016:
+        us["tum2016"] = run_tum2016(args.tum2016, sub, work)
+
+
+def score_set(folder, args):
+    names, frames, times = load_set(folder)
+    gs = groups(times)
+    methods = (["monovo"] if args.monovo else []) + (
+        [] if args.no_peers else ["debevec", "robertson"] + (["tum2016"] if args.tum2016 else []))
+    acc = {m: [0.0, 0, 0.0, 0.0] for m in methods}
+    failed = {m: [] for m in methods}
+    tables = {m: [] for m in methods}
+    for e, test in gs:
+        train = [i for i in range(len(frames)) if i not in test]
+        with tempfile.TemporaryDirectory() as work:
+            sub = os.path.join(work, "set")
+            write_subset(sub, names, frames, times, train)
+            us = {}
+            if args.monovo:
+                us["monovo"] = run_monovo(args.monovo, sub, work, args.monovo_args)
+            if args.no_peers:
+                pass
+            else:
+                peers(us, frames, times, train, sub, work, args)
+        for m in methods:
+
+            u, why = us.get(m, (None, ["not run"]))
+            if u is None:
+                failed[m].append({"exposure_ms": e, "why": why or ["non-finite table"]})
+                tables[m].append(None)
+                continue
+            tables[m].append([float(x) for x in u])
+            r = fold_errors(frames, times, train, test, u)
+            for k in range(4):
+                acc[m][k] += r[k]
+    h, w = frames[0].shape
+    res = {"frames": len(frames), "exposures": len(gs), "size": [w, h], "methods": {}}
+    for m in methods:
+        a = acc[m]
+        ok = not failed[m]
+        res["methods"][m] = {
+            "ls": float(np.sqrt(a[0] / a[1])) if ok and a[1] else None,
+            "tri": float(np.sqrt(a[2] / a[3])) if ok and a[3] else None,
+            "pixels": a[1],
+            "failed_folds": failed[m],
+            "tables": tables[m],
+        }
+    return res
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("sets", nargs="+")
+    ap.add_argument("--monovo", default=os.environ.get("MONOVO"))
+    ap.add_argument("--tum2016", default=os.environ.get("RESPONSECALIB"))
+    ap.add_argument("--json", metavar="FILE", help="write the scores and tables here")
+    ap.add_argument("--no-monovo", action="store_true", help="only the peers")
+    ap.add_argument("--no-peers", action="store_true", help="only monovo")
+    ap.add_argument("--monovo-args", default="", help="extra arguments of monovo calib response")
+    args = ap.parse_args()
+    if args.no_monovo:
+        args.monovo = None
+    out = {
+        "tool": "xtask/peers/bracket_scores.py",
+        "opencv": cv2.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "tum2016": "tum-vision/mono_dataset_code responseCalib" if args.tum2016 else None,
+        "sets": {},
+    }
+    print(f"{'set':<24} {'method':<10} {'ls':>8} {'tri':>8}  failed folds")
+    for folder in args.sets:
+        name = os.path.basename(os.path.normpath(folder))
+        res = score_set(folder, args)
+        out["sets"][name] = res
+        for m, r in res["methods"].items():
+            f = lambda v: "-" if v is None else f"{v:.3f}"
+            print(f"{name:<24} {m:<10} {f(r['ls']):>8} {f(r['tri']):>8}  {len(r['failed_folds'])}")
+        sys.stdout.flush()
+    if args.json:
+        tmp = args.json + ".tmp"
+        with open(tmp, "w") as fh:
+            json.dump(out, fh, indent=1)
+            fh.write("\n")
+        shutil.move(tmp, args.json)
+
+
+if __name__ == "__main__":
+    main()
