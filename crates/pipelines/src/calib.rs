@@ -291,12 +291,50 @@ pub fn response_figure(
         width: 1650,
         height: 520,
         panels: vec![
-            (Panel::Chart(c1), [0.0, 0.0, 0.34, 1.0]),
-            (Panel::Chart(c2), [0.34, 0.0, 0.33, 1.0]),
-            (Panel::Chart(c3), [0.67, 0.0, 0.33, 1.0]),
+            (Panel::Chart(c1), [0.0, 0.0, 0.26, 1.0]),
+            (Panel::Chart(c2), [0.26, 0.0, 0.25, 1.0]),
+            (Panel::Chart(c3), [0.51, 0.0, 0.245, 1.0]),
+            (
+                Panel::Chart(noise_chart(cal, top)),
+                [0.755, 0.0, 0.245, 1.0],
+            ),
         ],
     };
     Ok(figures::save(&fig, path)?)
+}
+
+/// The noise of one observation per predicted grey value: measured from the residuals (the
+/// weights use it), and the shot/read/ADC model fitted to it (a description only).
+fn noise_chart(cal: &photometric::ResponseCalibration, top: f64) -> Chart {
+    let mut c = Chart::new(
+        "noise of an observation",
+        "predicted grey value",
+        "standard deviation (grey values)",
+    );
+    c.legend = Some(Corner::TopLeft);
+    c.x_range = Some([0.0, top]);
+    let measured: Vec<[f64; 2]> = cal
+        .measured_noise
+        .iter()
+        .filter(|b| b.variance.is_finite() && b.variance >= 0.0)
+        .map(|b| [b.grey, b.variance.sqrt()])
+        .collect();
+    if !measured.is_empty() {
+        c.series
+            .push(Series::line("measured", measured, PALETTE[0]));
+    }
+    if let Some(m) = &cal.noise {
+        let u = cal.response.table();
+        let step = (u.len() / 256).max(1);
+        let model: Vec<[f64; 2]> = (0..u.len())
+            .step_by(step)
+            .map(|k| [k as f64, m.variance(u, k as f64).max(0.0).sqrt()])
+            .filter(|p| p[1].is_finite())
+            .collect();
+        c.series
+            .push(Series::line("shot/read/ADC model", model, PALETTE[3]).dashed());
+    }
+    c
 }
 
 /// Frames of a sequence with poses, decoded when the calibration asks (it keeps what it
