@@ -47,27 +47,15 @@ import tempfile
 import cv2
 import numpy as np
 
-IMAGE_EXT = (".png", ".jpg", ".jpeg", ".pgm", ".tif", ".tiff")
+from opencv_response import load_sweep, read_exposures_ms
+
 
 
 def load_set(folder):
-    d = os.path.join(folder, "images")
-    names = sorted(f for f in os.listdir(d) if f.lower().endswith(IMAGE_EXT))
-    frames = [cv2.imread(os.path.join(d, n), cv2.IMREAD_GRAYSCALE) for n in names]
-    if not frames or any(f is None for f in frames):
-        sys.exit(f"{folder}: no images, or an image failed to decode")
-    times = []
-    with open(os.path.join(folder, "times.txt")) as fh:
-        for lineno, line in enumerate(fh, 1):
-            cols = line.split()
-            if not cols or cols[0].startswith("#"):
-                continue
-            if len(cols) < 3:
-                sys.exit(f"{folder}/times.txt:{lineno}: expected `id timestamp_s exposure_ms`")
-            times.append(float(cols[2]))
-    if len(times) != len(frames):
-        sys.exit(f"{folder}: {len(frames)} images but {len(times)} exposures")
-    return names, frames, np.asarray(times, np.float64)
+    """(grey frames, exposures in ms) of a bracket folder, read as opencv_response.py reads
+    a sweep."""
+    frames, _ = load_sweep(folder)
+    return frames, read_exposures_ms(folder, len(frames))
 
 
 def groups(times):
@@ -101,7 +89,7 @@ def opencv_table(table):
     return u
 
 
-def write_subset(folder, names, frames, times, keep, camera=True):
+def write_subset(folder, frames, times, keep, camera=True):
     os.makedirs(os.path.join(folder, "images"))
     with open(os.path.join(folder, "times.txt"), "w") as fh:
         for j, i in enumerate(keep):
@@ -193,7 +181,7 @@ def peers(us, frames, times, train, sub, work, args):
 
 
 def score_set(folder, args):
-    names, frames, times = load_set(folder)
+    frames, times = load_set(folder)
     gs = groups(times)
     methods = (["monovo"] if args.monovo else []) + (
         [] if args.no_peers else ["debevec", "robertson"] + (["tum2016"] if args.tum2016 else []))
@@ -204,7 +192,7 @@ def score_set(folder, args):
         train = [i for i in range(len(frames)) if i not in test]
         with tempfile.TemporaryDirectory() as work:
             sub = os.path.join(work, "set")
-            write_subset(sub, names, frames, times, train)
+            write_subset(sub, frames, times, train)
             us = {}
             if args.monovo:
                 us["monovo"] = run_monovo(args.monovo, sub, work, args.monovo_args)

@@ -80,6 +80,12 @@ def load_sweep(folder):
             frames.append(cv2.imread(os.path.join(d, n), cv2.IMREAD_GRAYSCALE))
     if not frames or any(f is None for f in frames):
         sys.exit(f"{folder}: no images, or an image failed to decode")
+    exposures_ms = read_exposures_ms(folder, len(frames))
+    return frames, (exposures_ms / 1000.0).astype(np.float32)
+
+
+def read_exposures_ms(folder, frames):
+    """The exposure column of FOLDER/times.txt (ms, float64), one per frame."""
     exposures_ms = []
     with open(os.path.join(folder, "times.txt")) as fh:
         for lineno, line in enumerate(fh, 1):
@@ -89,9 +95,9 @@ def load_sweep(folder):
             if len(cols) < 3:
                 sys.exit(f"{folder}/times.txt:{lineno}: no exposure column")
             exposures_ms.append(float(cols[2]))
-    if len(exposures_ms) != len(frames):
-        sys.exit(f"{folder}: {len(frames)} images but {len(exposures_ms)} exposures")
-    return frames, (np.asarray(exposures_ms) / 1000.0).astype(np.float32)
+    if len(exposures_ms) != frames:
+        sys.exit(f"{folder}: {frames} images but {len(exposures_ms)} exposures")
+    return np.asarray(exposures_ms, np.float64)
 
 
 def load_pcalib(path):

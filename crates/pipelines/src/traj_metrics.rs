@@ -9,7 +9,7 @@ use eval_metrics::{
     ape, detect_format, evo_result_entries, kitti_errors, parse_euroc, parse_kitti_poses,
     parse_tum, rpe, tum_ate, tum_rpe, AlignMode, AlignOptions, AlignTransform, ApeOptions,
     ErrorStats, EvoResultInfo, ExtraMetric, KittiLengthError, KittiResult, MetricError, NamedArray,
-    PoseTrack, RpeOptions, TrajectoryFormat, TumAteOptions, TumRpeOptions,
+    PoseRelation, PoseTrack, RpeOptions, TrajectoryFormat, TumAteOptions, TumRpeOptions,
 };
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -193,6 +193,64 @@ pub fn metric_report(
     }
 }
 
+/// What an evo-convention report (APE or RPE) is made of: the result's parts, and the poses
+/// its arrays and plot are indexed by (`seconds`, `distances` per error; `timestamps` and
+/// `estimate_distances` of the estimate when it has stamps).
+struct EvoParts {
+    metric: &'static str,
+    title: String,
+    stats: ErrorStats,
+    errors: Vec<f64>,
+    alignment: Option<AlignTransform>,
+    reference: PoseTrack,
+    estimate: PoseTrack,
+    seconds: Vec<f64>,
+    distances: Vec<f64>,
+    timestamps: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+/// The report of `evo_ape`/`evo_rpe`: the statistics, the alignment and evo's result arrays.
+fn evo_report(
+    p: EvoParts,
+    relation: PoseRelation,
+    align: &AlignOptions,
+    names: [&str; 2],
+) -> MetricReport {
+    let mut arrays = vec![arr("error_array", p.errors.clone())];
+    if let Some((timestamps, estimate_distances)) = p.timestamps {
+        arrays.push(arr("seconds_from_start", p.seconds.clone()));
+        arrays.push(arr("timestamps", timestamps));
+        arrays.push(arr("distances_from_start", p.distances.clone()));
+        arrays.push(arr("distances", estimate_distances));
+    }
+    arrays.extend(alignment_array(&p.alignment));
+    MetricReport {
+        metric: p.metric,
+        convention: "evo",
+        title: p.title,
+        pose_relation: relation.name(),
+        unit: relation.unit(),
+        stats: p.stats,
+        translational_error: None,
+        rotational_error: None,
+        compared_pose_pairs: p.stats.n,
+        alignment: p
+            .alignment
+            .as_ref()
+            .map(|a| AlignmentReport::new(mode_name(align), a)),
+        reference: names[0].to_string(),
+        estimate: names[1].to_string(),
+        plot: PlotData {
+            errors: p.errors,
+            seconds: p.seconds,
+            distances: p.distances,
+            reference: p.reference.positions,
+            estimate: p.estimate.positions,
+        },
+        arrays,
+    }
+}
+
 /// APE as `evo_ape` computes it.
 fn ape_report(
     r: &PoseTrack,
@@ -201,41 +259,24 @@ fn ape_report(
     opts: &ApeOptions,
 ) -> Result<MetricReport> {
     let res = ape(r, e, opts).map_err(|err| metric_err("APE", names, err))?;
-    let seconds = seconds_of(&res.estimate);
-    let distances = res.reference.distances();
-    let mut arrays = vec![arr("error_array", res.errors.clone())];
-    if let Some(ts) = &res.estimate.times {
-        arrays.push(arr("seconds_from_start", seconds.clone()));
-        arrays.push(arr("timestamps", ts.clone()));
-        arrays.push(arr("distances_from_start", distances.clone()));
-        arrays.push(arr("distances", res.estimate.distances()));
-    }
-    arrays.extend(alignment_array(&res.alignment));
-    Ok(MetricReport {
+    let timestamps = res
+        .estimate
+        .times
+        .clone()
+        .map(|ts| (ts, res.estimate.distances()));
+    let parts = EvoParts {
         metric: "ape",
-        convention: "evo",
-        title: res.title.clone(),
-        pose_relation: opts.relation.name(),
-        unit: opts.relation.unit(),
+        seconds: seconds_of(&res.estimate),
+        distances: res.reference.distances(),
+        timestamps,
+        title: res.title,
         stats: res.stats,
-        translational_error: None,
-        rotational_error: None,
-        compared_pose_pairs: res.stats.n,
-        alignment: res
-            .alignment
-            .as_ref()
-            .map(|a| AlignmentReport::new(mode_name(&opts.align), a)),
-        reference: names[0].to_string(),
-        estimate: names[1].to_string(),
-        plot: PlotData {
-            errors: res.errors,
-            seconds,
-            distances,
-            reference: res.reference.positions,
-            estimate: res.estimate.positions,
-        },
-        arrays,
-    })
+        errors: res.errors,
+        alignment: res.alignment,
+        reference: res.reference,
+        estimate: res.estimate,
+    };
+    Ok(evo_report(parts, opts.relation, &opts.align, names))
 }
 
 /// RPE as `evo_rpe` computes it.
@@ -251,41 +292,23 @@ fn rpe_report(
     ids.extend(res.pairs.iter().map(|p| p.1));
     let sub_ref = res.reference.select(&ids);
     let sub_est = res.estimate.select(&ids);
-    let seconds: Vec<f64> = seconds_of(&sub_est).into_iter().skip(1).collect();
-    let distances: Vec<f64> = sub_ref.distances().into_iter().skip(1).collect();
-    let mut arrays = vec![arr("error_array", res.errors.clone())];
-    if let Some(ts) = &sub_est.times {
-        arrays.push(arr("seconds_from_start", seconds.clone()));
-        arrays.push(arr("timestamps", ts[1..].to_vec()));
-        arrays.push(arr("distances_from_start", distances.clone()));
-        arrays.push(arr("distances", sub_est.distances()[1..].to_vec()));
-    }
-    arrays.extend(alignment_array(&res.alignment));
-    Ok(MetricReport {
+    let timestamps = sub_est
+        .times
+        .as_ref()
+        .map(|ts| (ts[1..].to_vec(), sub_est.distances()[1..].to_vec()));
+    let parts = EvoParts {
         metric: "rpe",
-        convention: "evo",
-        title: res.title.clone(),
-        pose_relation: opts.relation.name(),
-        unit: opts.relation.unit(),
+        seconds: seconds_of(&sub_est).into_iter().skip(1).collect(),
+        distances: sub_ref.distances().into_iter().skip(1).collect(),
+        timestamps,
+        title: res.title,
         stats: res.stats,
-        translational_error: None,
-        rotational_error: None,
-        compared_pose_pairs: res.stats.n,
-        alignment: res
-            .alignment
-            .as_ref()
-            .map(|a| AlignmentReport::new(mode_name(&opts.align), a)),
-        reference: names[0].to_string(),
-        estimate: names[1].to_string(),
-        plot: PlotData {
-            errors: res.errors,
-            seconds,
-            distances,
-            reference: res.reference.positions,
-            estimate: res.estimate.positions,
-        },
-        arrays,
-    })
+        errors: res.errors,
+        alignment: res.alignment,
+        reference: res.reference,
+        estimate: res.estimate,
+    };
+    Ok(evo_report(parts, opts.relation, &opts.align, names))
 }
 
 /// The absolute trajectory error as the TUM RGB-D `evaluate_ate.py` computes it.

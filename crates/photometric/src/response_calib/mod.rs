@@ -416,16 +416,18 @@ fn fit_growing<T: Sample>(
         options.max_pixels.min(available)
     }
     .min(memory_cap);
-    let top = base.levels.top;
+    let draw_n = |n| {
+        draw(
+            frames,
+            scan,
+            base.levels.top,
+            options.saturation_border,
+            options.saturation_block,
+            n,
+        )
+    };
     let mut n = FIRST_DRAW.min(limit);
-    let mut samples = draw(
-        frames,
-        scan,
-        top,
-        options.saturation_border,
-        options.saturation_block,
-        n,
-    );
+    let mut samples = draw_n(n);
     let mut start = Start::Cold;
     let mut iterations = 0;
     let mut change = Vec::new();
@@ -461,14 +463,7 @@ fn fit_growing<T: Sample>(
         // the error falls with the square root of the pixels
         let want = (n as f64 * (se / options.target_std_error).powi(2) * 1.2).ceil() as usize;
         let next = want.clamp(2 * n, limit.max(2 * n)).min(limit);
-        let bigger = draw(
-            frames,
-            scan,
-            top,
-            options.saturation_border,
-            options.saturation_block,
-            next,
-        );
+        let bigger = draw_n(next);
         let b = carry_over(&samples, &bigger, &fit.b);
         start = Start::Warm {
             u: fit.u,
@@ -515,8 +510,7 @@ fn calibrate<T: Sample>(
     let nk = levels.knots;
     let top = levels.top;
     let sc = scan(frames, top);
-    let histogram = sc.histogram.clone();
-    check_brightness(&histogram, levels, options.min_count)?;
+    check_brightness(&sc.histogram, levels, options.min_count)?;
     if sc.order.is_empty() {
         return Err(invalid(
             "no pixel has two unsaturated values at different exposures: record exposures that overlap in brightness".into(),
@@ -573,8 +567,7 @@ fn calibrate<T: Sample>(
         .collect();
     let k_lo = (0..nk).find(|&k| determined[k]).unwrap_or(0);
     let k_hi = (0..nk).rev().find(|&k| determined[k]).unwrap_or(nk - 1);
-    let grey = |k: usize| (k as f64 / levels.scale).round() as u32;
-    let (g_lo, g_hi) = (grey(k_lo), grey(k_hi));
+    let (g_lo, g_hi) = (levels.grey(k_lo), levels.grey(k_hi));
     let filled: Vec<u32> = (0..=top).filter(|&v| v < g_lo || v > g_hi).collect();
     let warnings = check_range(&levels, k_lo, k_hi, &distinct, fit, &grown)?;
 
@@ -582,7 +575,7 @@ fn calibrate<T: Sample>(
     let errors = standard_errors(fit, first, last)?;
     let base_u = normalized(&extrapolate(&fit.u, first, last).0);
     // the sensitivities estimate the systematic errors only to within a factor: the band is
-    // twice the combined estimate, with a floor of 0.1% of U
+    // UNCERTAINTY_FACTOR times the combined estimate, with a floor of 0.1% of U
     let mut std_error = vec![0.0; nk];
     let mut systematic = vec![0.0; nk];
     for k in 0..nk - 1 {
@@ -613,7 +606,6 @@ fn calibrate<T: Sample>(
         rmse,
         observed_range: (g_lo, g_hi),
         filled,
-        histogram,
         used,
         knot_step: 1.0 / levels.scale,
         measured_noise,
@@ -628,6 +620,7 @@ fn calibrate<T: Sample>(
         prior_weight: median(&fit.prior),
         pixels_sampled: grown.samples.len(),
         pixels_available: sc.order.len(),
+        histogram: sc.histogram,
         sampling_error: grown.sampling_error,
         warnings,
     })
@@ -663,12 +656,11 @@ fn check_brightness(
     let (Some(lo), Some(hi)) = (lo, hi) else {
         return Err(invalid("no unsaturated pixel in any frame".into()));
     };
-    let grey = |k: usize| (k as f64 / levels.scale).round() as u32;
     if hi - lo < 16 * (nk - 1) / 255 {
         return Err(invalid(format!(
             "only grey values {}..{} are observed; the scene needs a wider range of brightness (dark pixels and bright ones)",
-            grey(lo),
-            grey(hi)
+            levels.grey(lo),
+            levels.grey(hi)
         )));
     }
     Ok(())
@@ -686,8 +678,7 @@ fn check_range(
     let nk = levels.knots;
     let top = levels.top;
     let at = |g: usize| g * (nk - 1) / 255;
-    let grey = |k: usize| (k as f64 / levels.scale).round() as u32;
-    let (g_lo, g_hi) = (grey(k_lo), grey(k_hi));
+    let (g_lo, g_hi) = (levels.grey(k_lo), levels.grey(k_hi));
     if k_hi < at(192) {
         return Err(invalid(format!(
             "the data determine U only up to grey value {g_hi} of {top}: no pixel is predicted brighter; record longer exposures or a brighter scene so that grey values up to about {} are observed",

@@ -61,6 +61,11 @@ impl Levels {
     pub fn knot(&self, v: u32) -> usize {
         ((v as f64 * self.scale).round() as usize).min(self.knots - 1)
     }
+
+    /// The nearest grey value of a knot.
+    pub fn grey(&self, k: usize) -> u32 {
+        (k as f64 / self.scale).round() as u32
+    }
 }
 
 /// Side of the square tiles whose pixels count as one independent unit in the standard errors

@@ -841,11 +841,9 @@ pub(super) fn solve(
             || taken_back >= MAX_TAKEN_BACK
             || flat >= FLAT_STEPS
         {
-            if taken_back > 0 {
-                u.clone_from(&accepted.as_ref().map_or(u.clone(), |a| a.0.clone()));
-                if let Some(a) = &accepted {
-                    b.clone_from(&a.1);
-                }
+            if let (true, Some(a)) = (taken_back > 0, &accepted) {
+                u.clone_from(&a.0);
+                b.clone_from(&a.1);
             }
             converged = true;
             break;
