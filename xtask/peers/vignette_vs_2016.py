@@ -16,15 +16,17 @@ point's position and spreads the observation bilinearly over the four pixels aro
 Over uniformly spread positions, a pixel's noise then enters its own V with weight
 E[(1-f)^2] + E[f^2] = 2/3 and each neighbour's with E[f (1-f)] = 1/6, in each direction:
 the per-pixel estimate filtered with [1/6 2/3 1/6] x [1/6 2/3 1/6] (half the noise of
-white noise, neighbour correlation 0.41). Maps given after --through-2016-kernel are
-scored after that filter as well, for a like-for-like comparison.
+white noise, neighbour correlation 0.41). monovo's NAME_raw.png is sampled so too; its
+per-pixel map is NAME.png written with --smoothing 0. Maps given after
+--through-2016-kernel are scored after that filter as well (for a per-pixel map).
 
     monovo synth vignette -o wall --png --seed 3 --sensor gain --noise high --response dorf8
     monovo calib vignette wall -o wall/m.png
+    monovo calib vignette wall -o wall/pixel.png --smoothing 0
     (cd run && QT_QPA_PLATFORM=offscreen vignetteCalib_headless ../wall/)
-    python3 xtask/peers/vignette_vs_2016.py wall wall/m.png wall/m_raw.png \
+    python3 xtask/peers/vignette_vs_2016.py wall wall/m.png wall/m_raw.png wall/pixel.png \
         run/vignetteCalibResult/vignette.png run/vignetteCalibResult/vignetteSmoothed.png \
-        --through-2016-kernel wall/m_raw.png
+        --through-2016-kernel wall/pixel.png
 """
 import os
 import sys
