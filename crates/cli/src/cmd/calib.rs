@@ -208,7 +208,7 @@ pub struct VignetteArgs {
     ))]
     pub max_iterations: Option<usize>,
     /// Smoothing of vignette.png (Gaussian standard deviation in pixels) instead of the one
-    /// chosen by cross-validation; 0 writes the raw map.
+    /// chosen by cross-validation; 0 writes the per-pixel map (unregularised, unsampled).
     #[arg(long, value_name = "PX")]
     pub smoothing: Option<f64>,
     /// Registration uncertainty of the plane in pixels (weights observations at edges of
