@@ -281,13 +281,15 @@ fn twelve_bit_frames_calibrate_with_the_deep_table() {
         assert!(cal.converged, "{:?}", cal.change);
         // the recommended map's error is mostly low-frequency and varies by +-30% between
         // noise realisations (seeds 11, 13, 14, 15 at high noise: 12-bit / 8-bit = 1.29,
-        // 0.92, 1.32, 1.15); the raw map's is per-pixel noise and hardly varies
+        // 0.92, 1.32, 1.15); the per-pixel map's is per-pixel noise and hardly varies, but
+        // the raw map, sampled as the 2016 tool samples its own, keeps half of it, and the
+        // low-frequency part shows (seed 11: 12-bit / 8-bit = 1.04 typical, 1.09 high)
         assert!(
             rms < 0.0025 && rms <= rms8 * 1.5,
             "recommended {rms} (8-bit {rms8})"
         );
         assert!(
-            raw < 0.006 && raw <= raw8 * 1.05 && valid > 0.98,
+            raw < 0.006 && raw <= raw8 * 1.15 && valid > 0.98,
             "raw {raw} (8-bit {raw8}) valid {valid}"
         );
         let within = |est: &Image<f32>, sd: &Image<f32>| {

@@ -65,7 +65,7 @@ variance measured from the residuals beside the shot/read/ADC model fitted to it
     Response(ResponseArgs),
     /// A dense vignette map (vignette.png) from a video of a bright planar wall with one
     /// printed ArUco marker (original dictionary) that gives the plane's pose, with the
-    /// paper's unregularised map, the standard error and the coverage beside it.
+    /// paper's raw map, the standard error and the coverage beside it.
     #[command(after_help = "\
 Film a bright, matte, planar surface (a white wall) with one printed marker of the original
 ArUco dictionary (id 213 by default; the printed marker, black border included, is the unit
@@ -79,9 +79,12 @@ Writes, all 16-bit grey PNG at the raw resolution:
   vignette.png           the map to use (V = value / 65535, max 1): the paper's map smoothed
                          with a strength chosen by cross-validation between the maps of the
                          odd and of the even frames (printed; --smoothing sets it)
-  vignette_raw.png       the paper's unregularised per-pixel map on the same scale (pixels
-                         without enough observations, and defective ones, take the value of
-                         vignette.png; the coverage image tells which)
+  vignette_raw.png       the paper's unregularised map on the same scale, sampled as the
+                         authors' 2016 tool samples its raw map: the per-pixel estimate
+                         filtered with [1/6 2/3 1/6] in x and y (--smoothing 0 writes the
+                         per-pixel map itself as vignette.png). Pixels without enough
+                         observations, and defective ones, take the value of vignette.png;
+                         the coverage image tells which
   vignette_std.png       the standard error of vignette.png per pixel; the value that 65535
                          stands for is in the PNG's text chunk `monovo:std_scale` and in --json
   vignette_coverage.png  observations per pixel (0: none)
@@ -221,7 +224,7 @@ pub struct VignetteArgs {
     ))]
     pub max_iterations: Option<usize>,
     /// Smoothing of vignette.png (Gaussian standard deviation in pixels) instead of the one
-    /// chosen by cross-validation; 0 writes the raw map.
+    /// chosen by cross-validation; 0 writes the per-pixel map (unregularised, unsampled).
     #[arg(long, value_name = "PX")]
     pub smoothing: Option<f64>,
     /// Registration uncertainty of the plane in pixels (weights observations at edges of

@@ -19,9 +19,11 @@
 //!   links them) must be connected, else the scale of `V` differs between its parts and the
 //!   paper's argument for a unique solution fails; image corners the plane never covers are
 //!   refused, not invented.
-//! * **The paper's map and the one to use**: the raw, unregularised per-pixel map, and a
-//!   smoothed map whose smoothing is chosen by cross-validation between the maps of the odd
-//!   and of the even frames (see [`crate::smoothing`]).
+//! * **The paper's map and the one to use**: the raw map, unregularised but sampled as the
+//!   authors' 2016 tool samples its own (the per-pixel estimate read and spread bilinearly:
+//!   `[1/6 2/3 1/6]` in x and in y, which halves its noise), and a smoothed map whose
+//!   smoothing is chosen by cross-validation between the per-pixel maps of the odd and of
+//!   the even frames (see [`crate::smoothing`]; no smoothing gives the per-pixel map).
 //! * **With its uncertainty**: per pixel, from the normal equations with the residual scale
 //!   checked against the odd/even difference, for both maps.
 
@@ -252,7 +254,10 @@ pub struct VignetteCalibration {
     /// The map recommended for correction: the raw map smoothed as chosen, `max = 1`, finite
     /// everywhere.
     pub vignette: Image<f32>,
-    /// The paper's unregularised per-pixel map on the same scale; NaN where a pixel has too
+    /// The paper's unregularised map on the same scale, sampled as the authors' 2016 tool
+    /// samples its raw map (the per-pixel estimate filtered with `[1/6 2/3 1/6]` in x and in
+    /// y, over the valid neighbours; `smoothing_px = Some(0.0)` gives the per-pixel map as
+    /// [`VignetteCalibration::vignette`]); NaN where a pixel has too
     /// few observations or is defective (hot or dead: far from its neighbourhood in the maps
     /// of both the odd and the even frames).
     pub raw: Image<f32>,

@@ -95,6 +95,7 @@ pub(super) fn finish(
             }
         })
         .collect();
+    let (raw, raw_var) = sampled_as_2016((w, h), &raw, &raw_var);
     let raw_img = to_img(&raw, max)?;
     let raw_std: Vec<f64> = (0..npx)
         .map(|i| {
@@ -294,4 +295,121 @@ pub(super) fn fitted_peak(
     let area = (4.0 * std::f64::consts::PI * sigma_px * sigma_px).max(1.0);
     let var = (f.transpose() * inv * f)[(0, 0)] * area;
     (value.is_finite() && var >= 0.0).then_some((value, var.sqrt()))
+}
+
+/// The weights of a pixel's own estimate and of each neighbour's, per direction, in the map
+/// the authors' 2016 tool writes as its raw one: it reads the image bilinearly at a plane
+/// point's position and adds the observation bilinearly to the four pixels around it, so
+/// that over positions spread evenly between pixels a pixel's data enter its own value with
+/// weight `E[(1-f)^2] + E[f^2] = 2/3` and each neighbour's with `E[f (1-f)] = 1/6`.
+pub(super) const SAMPLING_2016: [f64; 3] = [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0];
+
+/// The per-pixel map `raw` (variance `var`; NaN where a pixel is not valid) sampled as the
+/// 2016 tool samples its raw map: filtered with [`SAMPLING_2016`] in x and then in y, and the
+/// variance carried through (the pixels' estimates are independent). A pixel that is not
+/// valid stays NaN; where a neighbour along a direction is missing (the image's border, a
+/// pixel that is not valid) the pixel keeps its own value along that direction: a one-sided
+/// filter would shift it by a sixth of the map's slope, several standard errors where a small
+/// image's vignette is steep.
+pub(super) fn sampled_as_2016(
+    (w, h): (usize, usize),
+    raw: &[f64],
+    var: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let [side, centre, _] = SAMPLING_2016;
+    let pass = |v: &[f64], s2: &[f64], step: usize, len: usize, at: &dyn Fn(usize) -> usize| {
+        let mut out = v.to_vec();
+        let mut out_var = s2.to_vec();
+        for i in 0..v.len() {
+            if !v[i].is_finite() {
+                out_var[i] = f64::NAN;
+                continue;
+            }
+            let pos = at(i);
+            if pos == 0 || pos + 1 >= len {
+                continue;
+            }
+            let (a, b) = (i - step, i + step);
+            if v[a].is_finite() && v[b].is_finite() {
+                out[i] = side * (v[a] + v[b]) + centre * v[i];
+                out_var[i] = side * side * (s2[a] + s2[b]) + centre * centre * s2[i];
+            }
+        }
+        (out, out_var)
+    };
+    let (x, x_var) = pass(raw, var, 1, w, &|i| i % w);
+    pass(&x, &x_var, w, h, &|i| i / w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Independent errors through the 2016 tool's sampling: a constant map stays constant,
+    /// an invalid pixel stays invalid and its neighbours keep their own values along the
+    /// direction where it lies, a linear map stays as it is (the border too), the variance of white
+    /// noise falls to `(1/36 + 4/9 + 1/36)^2 = 1/4` inside the image, and the errors of
+    /// neighbours correlate by `(2 * 1/6 * 2/3) / (1/2) = 4/9` (the 2016 tool's raw maps:
+    /// 0.40-0.41 after the high-pass of `xtask/peers/vignette_vs_2016.py`).
+    #[test]
+    fn the_2016_sampling_quarters_white_noise_and_keeps_holes() {
+        let (w, h) = (200, 150);
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut noise = || {
+            // xorshift, then the sum of 12 uniforms less 6: about a standard normal
+            (0..12)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let sd = 0.01;
+        let mut raw: Vec<f64> = (0..w * h).map(|_| 1.0 + sd * noise()).collect();
+        raw[75 * w + 100] = f64::NAN;
+        let var = vec![sd * sd; w * h];
+        let (out, out_var) = sampled_as_2016((w, h), &raw, &var);
+        assert!(out[75 * w + 100].is_nan() && out_var[75 * w + 100].is_nan());
+        assert!(out[75 * w + 101].is_finite());
+        let (flat, _) = sampled_as_2016((w, h), &vec![0.5; w * h], &var);
+        assert!(flat.iter().all(|v| (v - 0.5).abs() < 1e-15));
+        let slope: Vec<f64> = (0..w * h)
+            .map(|i| 0.5 + 1e-3 * (i % w) as f64 - 2e-3 * (i / w) as f64)
+            .collect();
+        let (linear, _) = sampled_as_2016((w, h), &slope, &var);
+        assert!(linear
+            .iter()
+            .zip(&slope)
+            .all(|(a, b)| (a - b).abs() < 1e-12));
+        // beside the hole, along x: its own value in x; its neighbours in y filtered in x
+        let j = 75 * w + 101;
+        let [sd6, c] = [SAMPLING_2016[0], SAMPLING_2016[1]];
+        let x_of = |k: usize| sd6 * (raw[k - 1] + raw[k + 1]) + c * raw[k];
+        let expected = sd6 * (x_of(j - w) + x_of(j + w)) + c * raw[j];
+        assert!((out[j] - expected).abs() < 1e-12, "{} {expected}", out[j]);
+        let inner: Vec<usize> = (0..w * h)
+            .filter(|i| (2..w - 2).contains(&(i % w)) && (2..h - 2).contains(&(i / w)))
+            .filter(|i| out[*i].is_finite() && out[i + 1].is_finite())
+            .collect();
+        let n = inner.len() as f64;
+        let var_out = inner.iter().map(|&i| (out[i] - 1.0).powi(2)).sum::<f64>() / n;
+        assert!(
+            (var_out / (sd * sd) - 0.25).abs() < 0.02,
+            "{}",
+            var_out / (sd * sd)
+        );
+        let corr = inner
+            .iter()
+            .map(|&i| (out[i] - 1.0) * (out[i + 1] - 1.0))
+            .sum::<f64>()
+            / n
+            / var_out;
+        assert!((corr - 4.0 / 9.0).abs() < 0.03, "{corr}");
+        // the carried variance says the same
+        let predicted = out_var[75 * w + 20] / (sd * sd);
+        assert!((predicted - 0.25).abs() < 1e-12, "{predicted}");
+    }
 }
