@@ -38,6 +38,7 @@ fn inverse(u: &[f64], e: f64) -> f64 {
 }
 
 /// Pooled sums of one fold: (squared errors, count, weighted squared errors, weights).
+#[allow(clippy::needless_range_loop)]
 fn fold_sums(
     frames: &[&[u8]],
     times: &[f64],

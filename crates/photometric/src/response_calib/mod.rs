@@ -576,7 +576,10 @@ fn calibrate<T: Sample>(
         all,
     };
     let (base_u, std_error, systematic, rmse, sampling_error) = match log_choice {
-        Some((lambda, all)) => log_tables(fit, &data(all), lambda, (k_lo, k_hi))?,
+        Some((lambda, all)) => {
+            let ((u, se, sys), rmse, sampling) = log_tables(fit, &data(all), lambda, (k_lo, k_hi))?;
+            (u, se, sys, rmse, sampling)
+        }
         None => {
             let (u, se, sys) = grey_tables(fit)?;
             let rmse = (fit.sums.ss / fit.sums.nres.max(1) as f64).sqrt() / levels.scale;
@@ -677,7 +680,10 @@ fn held_out_check<T: Sample>(
 
 /// The grey-domain fit's table (`U(top) = 255`, continued beyond the data), its standard
 /// errors and their systematic part.
-fn grey_tables(fit: &Fit) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), PhotometricError> {
+/// A table, its standard errors and their systematic part.
+type Bands = (Vec<f64>, Vec<f64>, Vec<f64>);
+
+fn grey_tables(fit: &Fit) -> Result<Bands, PhotometricError> {
     let nk = fit.u.len();
     let (first, last) = data_range(&fit.sums.used);
     let errors = standard_errors(fit, first, last)?;
@@ -704,7 +710,7 @@ fn log_tables(
     data: &logfit::Data<'_>,
     lambda: f64,
     range: (usize, usize),
-) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, f64, f64), PhotometricError> {
+) -> Result<(Bands, f64, f64), PhotometricError> {
     let nk = data.levels.knots;
     let lf = logfit::fit(data, lambda)?;
     let rmse = logfit::grey_rmse(data, &lf.u);
@@ -725,7 +731,7 @@ fn log_tables(
         let e = UNCERTAINTY_FACTOR * lf.u[k] * lf.se_log[k];
         se[k] = e.hypot(systematic[k]).hypot(UNCERTAINTY_FLOOR * lf.u[k]);
     }
-    Ok((lf.u, se, systematic, rmse, sampling))
+    Ok(((lf.u, se, systematic), rmse, sampling))
 }
 
 /// The median of the prior's per-row weights (reported).
