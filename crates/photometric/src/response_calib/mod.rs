@@ -687,7 +687,7 @@ fn grey_tables(fit: &Fit) -> Result<Bands, PhotometricError> {
     let nk = fit.u.len();
     let (first, last) = data_range(&fit.sums.used);
     let errors = standard_errors(fit, first, last)?;
-    let base_u = normalized(&extrapolate(&fit.u, first, last).0);
+    let base_u = grey_table(fit);
     // the sensitivities estimate the systematic errors only to within a factor: the band is
     // UNCERTAINTY_FACTOR times the combined estimate, with a floor of 0.1% of U
     let mut std_error = vec![0.0; nk];
@@ -698,6 +698,12 @@ fn grey_tables(fit: &Fit) -> Result<Bands, PhotometricError> {
         std_error[k] = (UNCERTAINTY_FACTOR * total).hypot(UNCERTAINTY_FLOOR * base_u[k]);
     }
     Ok((base_u, std_error, systematic))
+}
+
+/// The grey-domain fit's table alone (`U(top) = 255`, continued beyond the data).
+fn grey_table(fit: &Fit) -> Vec<f64> {
+    let (first, last) = data_range(&fit.sums.used);
+    normalized(&extrapolate(&fit.u, first, last).0)
 }
 
 /// The log-domain fit's table, its standard errors and their systematic part, its residual
@@ -714,7 +720,7 @@ fn log_tables(
     let nk = data.levels.knots;
     let lf = logfit::fit(data, lambda)?;
     let rmse = logfit::grey_rmse(data, &lf.u);
-    let (grey, _, _) = grey_tables(fit)?;
+    let grey = grey_table(fit);
     let band = &lf.u[range.0..=range.1];
     let sampling = (band
         .iter()

@@ -170,16 +170,14 @@ fn held_out(
     cold: bool,
 ) -> Result<Vec<f32>, PhotometricError> {
     let quiet = |_: usize, _: f64| {};
-    let all = solve(
-        base,
-        Start::Cold,
-        &Settings {
-            max_iterations: 40,
-            tolerance: 0.02,
-            tiles: false,
-            progress: &quiet,
-        },
-    )?;
+    // a fit from the start every fit takes
+    let fresh = Settings {
+        max_iterations: 40,
+        tolerance: 0.02,
+        tiles: false,
+        progress: &quiet,
+    };
+    let all = solve(base, Start::Cold, &fresh)?;
     let mut out = Vec::new();
     for f in 0..k {
         let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
@@ -189,16 +187,7 @@ fn held_out(
             ..*base
         };
         let fit = if cold {
-            solve(
-                &p,
-                Start::Cold,
-                &Settings {
-                    max_iterations: 40,
-                    tolerance: 0.02,
-                    tiles: false,
-                    progress: &quiet,
-                },
-            )
+            solve(&p, Start::Cold, &fresh)
         } else {
             solve(
                 &p,
