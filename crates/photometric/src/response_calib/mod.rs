@@ -483,8 +483,11 @@ fn fit_growing<T: Sample>(
         // the error falls with the square root of the pixels
         let want = (n as f64 * (se / options.target_std_error).powi(2) * 1.2).ceil() as usize;
         let next = want.clamp(2 * n, limit.max(2 * n)).min(limit);
+        // the smaller draw goes before the bigger one is made (peak memory)
+        let ranks = std::mem::take(&mut samples.rank);
+        drop(samples);
         let bigger = draw_n(next);
-        let b = carry_over(&samples, &bigger, &fit.b);
+        let b = carry_over(&ranks, &bigger, &fit.b);
         start = Start::Warm {
             u: fit.u,
             b,
@@ -496,10 +499,11 @@ fn fit_growing<T: Sample>(
     }
 }
 
-/// The `B'` of the pixels of `old` at their places in `new` (NaN for the new pixels).
-fn carry_over(old: &Samples, new: &Samples, b: &[f64]) -> Vec<f64> {
-    let mut map = std::collections::HashMap::with_capacity(old.len());
-    for (q, &r) in old.rank.iter().enumerate() {
+/// The `B'` of the pixels of the draw of `old_ranks` at their places in `new` (NaN for the new
+/// pixels).
+fn carry_over(old_ranks: &[u32], new: &Samples, b: &[f64]) -> Vec<f64> {
+    let mut map = std::collections::HashMap::with_capacity(old_ranks.len());
+    for (q, &r) in old_ranks.iter().enumerate() {
         map.insert(r, b[q]);
     }
     new.rank

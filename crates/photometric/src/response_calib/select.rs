@@ -19,6 +19,7 @@ use super::samples::Samples;
 use super::solver::{solve, Problem, Settings, Start};
 use crate::noise::interp;
 use crate::PhotometricError;
+use rayon::prelude::*;
 
 /// Folds of the check: every distinct exposure its own fold up to [`LOEO_FOLDS`] exposures
 /// (a bracket: leave one exposure out), else this many interleaved folds (by exposure rank):
@@ -178,37 +179,42 @@ fn held_out(
         progress: &quiet,
     };
     let all = solve(base, Start::Cold, &fresh)?;
-    let mut out = Vec::new();
-    for f in 0..k {
-        let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
-        let p = Problem {
-            train: Some(&train),
-            log_gap: ripple_period(base.exposures, Some(&train)),
-            ..*base
-        };
-        let fit = if cold {
-            solve(&p, Start::Cold, &fresh)
-        } else {
-            solve(
-                &p,
-                Start::Warm {
-                    u: all.u.clone(),
-                    b: all.b.clone(),
-                    noise: all.noise.clone(),
-                    measured: None,
-                },
-                &Settings {
-                    max_iterations: FOLD_ITERATIONS,
-                    tolerance: 0.05,
-                    tiles: false,
-                    progress: &quiet,
-                },
-            )
-        };
-        let u = fit.ok().map(|f| f.u);
-        fold_residuals(base, fold, f, &train, u.as_deref(), cold, &mut out, None);
-    }
-    Ok(out)
+    // the folds are independent: fitted side by side, their residuals joined in fold order
+    let per_fold: Vec<Vec<f32>> = (0..k)
+        .into_par_iter()
+        .map(|f| {
+            let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
+            let p = Problem {
+                train: Some(&train),
+                log_gap: ripple_period(base.exposures, Some(&train)),
+                ..*base
+            };
+            let fit = if cold {
+                solve(&p, Start::Cold, &fresh)
+            } else {
+                solve(
+                    &p,
+                    Start::Warm {
+                        u: all.u.clone(),
+                        b: all.b.clone(),
+                        noise: all.noise.clone(),
+                        measured: None,
+                    },
+                    &Settings {
+                        max_iterations: FOLD_ITERATIONS,
+                        tolerance: 0.05,
+                        tiles: false,
+                        progress: &quiet,
+                    },
+                )
+            };
+            let u = fit.ok().map(|f| f.u);
+            let mut out = Vec::new();
+            fold_residuals(base, fold, f, &train, u.as_deref(), cold, &mut out, None);
+            out
+        })
+        .collect();
+    Ok(per_fold.concat())
 }
 
 /// The held-out residuals of the log-domain estimator with each of `lambdas` (on the values the
@@ -220,25 +226,35 @@ fn held_out_log(
     lambdas: &[f64],
     all: bool,
 ) -> Vec<Vec<f32>> {
-    let mut out = vec![Vec::new(); lambdas.len()];
-    for f in 0..k {
-        let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
-        let eq = logfit::normal(&logfit::Data {
-            samples: base.samples,
-            exposures: base.exposures,
-            train: Some(&train),
-            levels: &base.levels,
-            all,
-        });
-        for (o, &lambda) in out.iter_mut().zip(lambdas) {
-            let u = eq
-                .as_ref()
-                .ok()
-                .and_then(|eq| logfit::solve(eq, &base.levels, lambda).ok());
-            fold_residuals(base, fold, f, &train, u.as_deref(), true, o, None);
-        }
-    }
-    out
+    // per fold (side by side), per lambda
+    let per_fold: Vec<Vec<Vec<f32>>> = (0..k)
+        .into_par_iter()
+        .map(|f| {
+            let train: Vec<bool> = fold.iter().map(|&g| g != f).collect();
+            let eq = logfit::normal(&logfit::Data {
+                samples: base.samples,
+                exposures: base.exposures,
+                train: Some(&train),
+                levels: &base.levels,
+                all,
+            });
+            lambdas
+                .iter()
+                .map(|&lambda| {
+                    let u = eq
+                        .as_ref()
+                        .ok()
+                        .and_then(|eq| logfit::solve(eq, &base.levels, lambda).ok());
+                    let mut o = Vec::new();
+                    fold_residuals(base, fold, f, &train, u.as_deref(), true, &mut o, None);
+                    o
+                })
+                .collect()
+        })
+        .collect();
+    (0..lambdas.len())
+        .map(|l| per_fold.iter().flat_map(|f| f[l].iter().copied()).collect())
+        .collect()
 }
 
 /// The tile of every held-out residual, in the order of [`held_out`]'s.
@@ -367,12 +383,6 @@ pub(super) fn choose(
     if estimator != Estimator::Log {
         for &prior_scale in scales {
             for &measured in weightings {
-                let p = Problem {
-                    measured,
-                    prior_scale,
-                    ..p0
-                };
-                residuals.push(held_out(&p, &fold, k, false)?);
                 cands.push(Choice {
                     estimator: Estimator::Grey,
                     measured,
@@ -381,6 +391,21 @@ pub(super) fn choose(
                     all_values: false,
                 });
             }
+        }
+        // the candidates are independent: scored side by side, kept in order
+        let scored: Vec<Result<Vec<f32>, PhotometricError>> = cands
+            .par_iter()
+            .map(|c| {
+                let p = Problem {
+                    measured: c.measured,
+                    prior_scale: c.prior_scale,
+                    ..p0
+                };
+                held_out(&p, &fold, k, false)
+            })
+            .collect();
+        for r in scored {
+            residuals.push(r?);
         }
     }
     // the grey-domain choice, and its honest score against the log-domain fits: fold fits

@@ -355,6 +355,9 @@ pub(super) fn chunks(s: &Samples, min: usize) -> Vec<std::ops::Range<usize>> {
     out
 }
 
+/// Chunks of a pass summed one after the other by one thread.
+const PASS_GROUP: usize = 8;
+
 /// One pass over all pixels in fixed chunks, merged in chunk order.
 fn pass(
     p: &Problem<'_>,
@@ -371,9 +374,18 @@ fn pass(
         parts.push((r, head));
         rest = tail;
     }
+    // fixed groups of chunks, each summed in order (the sums of a chunk hold the residual
+    // histograms: one per chunk alive at once would cost memory)
     let sums: Vec<Sums> = parts
         .into_par_iter()
-        .map(|(r, bs)| pass_chunk(p, m, r.clone(), bs, tiles))
+        .chunks(PASS_GROUP)
+        .map(|group| {
+            let mut acc = Sums::new(p.levels.knots);
+            for (r, bs) in group {
+                acc.add(pass_chunk(p, m, r.clone(), bs, tiles));
+            }
+            acc
+        })
         .collect();
     let mut total = Sums::new(p.levels.knots);
     for s in sums {
@@ -729,6 +741,42 @@ const OBJECTIVE_TOLERANCE: f64 = 1e-7;
 /// data leave it free (the standard errors say where), and the fit no longer improves.
 const FLAT_STEPS: usize = 3;
 
+/// A step smaller than this fraction of every value's standard error is within the noise.
+const SETTLED_FRACTION: f64 = 0.25;
+
+/// Largest table for which the settled test inverts the normal matrix (8-bit: 256 knots).
+const SETTLED_MAX_KNOTS: usize = 512;
+
+/// Whether the step from `u` to `nu` moved no value of `U` in `range` by more than
+/// [`SETTLED_FRACTION`] of its standard error (from the inverse of the U step's normal matrix,
+/// the gauge and `U(0)` held). Far below the tolerance in grey values where the data are
+/// dense, this ends iterations that only move a value the data barely determine (the top
+/// code, set by the clipped observations alone), which would otherwise wander within its
+/// noise for many passes.
+fn within_noise(
+    u: &[f64],
+    nu: &[f64],
+    sums: &Sums,
+    pen: &Penalty,
+    (first, last): (usize, usize),
+) -> bool {
+    let n = u.len();
+    if n > SETTLED_MAX_KNOTS || sums.hess.len() != n * n {
+        return false;
+    }
+    let (a, _) = u_system(u, sums, pen, 1.0);
+    let Some(chol) = a.cholesky() else {
+        return false;
+    };
+    let inv = chol.inverse();
+    (first..=last.min(n - 1))
+        .filter(|&k| k != 0 && k != gauge(n))
+        .all(|k| {
+            let se = inv[(k, k)].max(0.0).sqrt();
+            (nu[k] - u[k]).abs() <= SETTLED_FRACTION * se
+        })
+}
+
 /// Runs the iteration.
 pub(super) fn solve(
     p: &Problem<'_>,
@@ -827,6 +875,7 @@ pub(super) fn solve(
             * 255.0
             / nu[n - 1].max(1e-12);
         change.push(delta);
+        let settled = !adapt && !worse && within_noise(&u, &nu, sums, pen, (k_first, k_last));
         if adapt {
             if let Some(m) = measure(&sums.resid, clip_lo, clip_hi, floor) {
                 noise = noise_from(p, &m);
@@ -838,6 +887,7 @@ pub(super) fn solve(
         // converged: the step is below the tolerance, or no step improves the accepted state
         // any more (the objective's rounding and the B' steps' own error bound it)
         if (!worse && delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS))
+            || settled
             || taken_back >= MAX_TAKEN_BACK
             || flat >= FLAT_STEPS
         {
