@@ -741,21 +741,27 @@ const OBJECTIVE_TOLERANCE: f64 = 1e-7;
 /// data leave it free (the standard errors say where), and the fit no longer improves.
 const FLAT_STEPS: usize = 3;
 
-/// A step smaller than this fraction of every value's standard error is within the noise.
+/// The iteration has settled when what remains of it, projected from the last step and the
+/// rate at which the steps shrink, is below this fraction of every value's standard error.
 const SETTLED_FRACTION: f64 = 0.25;
+
+/// The slowest rate at which the steps are taken to shrink (a remaining path of at most 19
+/// more steps).
+const MAX_RATE: f64 = 0.95;
 
 /// Largest table for which the settled test inverts the normal matrix (8-bit: 256 knots).
 const SETTLED_MAX_KNOTS: usize = 512;
 
-/// Whether the step from `u` to `nu` moved no value of `U` in `range` by more than
-/// [`SETTLED_FRACTION`] of its standard error (from the inverse of the U step's normal matrix,
-/// the gauge and `U(0)` held). Far below the tolerance in grey values where the data are
-/// dense, this ends iterations that only move a value the data barely determine (the top
-/// code, set by the clipped observations alone), which would otherwise wander within its
-/// noise for many passes.
+/// Whether the step from `u` to `nu`, times `ahead` (the remaining path in steps), moves no
+/// value of `U` in `range` by more than [`SETTLED_FRACTION`] of its standard error (from the
+/// inverse of the U step's normal matrix, the gauge and `U(0)` held). Far below the
+/// tolerance in grey values where the data are dense, this ends iterations that only move a
+/// value the data barely determine (the top code, set by the clipped observations alone),
+/// which would otherwise creep within its noise for many passes.
 fn within_noise(
     u: &[f64],
     nu: &[f64],
+    ahead: f64,
     sums: &Sums,
     pen: &Penalty,
     (first, last): (usize, usize),
@@ -773,7 +779,7 @@ fn within_noise(
         .filter(|&k| k != 0 && k != gauge(n))
         .all(|k| {
             let se = inv[(k, k)].max(0.0).sqrt();
-            (nu[k] - u[k]).abs() <= SETTLED_FRACTION * se
+            (nu[k] - u[k]).abs() * ahead <= SETTLED_FRACTION * se
         })
 }
 
@@ -875,7 +881,15 @@ pub(super) fn solve(
             * 255.0
             / nu[n - 1].max(1e-12);
         change.push(delta);
-        let settled = !adapt && !worse && within_noise(&u, &nu, sums, pen, (k_first, k_last));
+        // the steps shrink by about `rate` a pass: what remains of the iteration is about
+        // `rate / (1 - rate)` steps more (a step that did not shrink: the slowest rate allowed)
+        let rate = match change.len() {
+            2.. if !worse => (delta / change[change.len() - 2]).clamp(0.0, MAX_RATE),
+            _ => MAX_RATE,
+        };
+        let settled = !adapt
+            && !worse
+            && within_noise(&u, &nu, 1.0 / (1.0 - rate), sums, pen, (k_first, k_last));
         if adapt {
             if let Some(m) = measure(&sums.resid, clip_lo, clip_hi, floor) {
                 noise = noise_from(p, &m);
