@@ -465,6 +465,7 @@ fn fit_growing<T: Sample>(
                 max_iterations: options.max_iterations.saturating_sub(iterations).max(1),
                 tolerance: options.tolerance,
                 tiles: true,
+                settle: true,
                 progress: &|i, d| progress(offset + i, d),
             },
         )?;

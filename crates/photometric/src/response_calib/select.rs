@@ -176,6 +176,7 @@ fn held_out(
         max_iterations: 40,
         tolerance: 0.02,
         tiles: false,
+        settle: false,
         progress: &quiet,
     };
     let all = solve(base, Start::Cold, &fresh)?;
@@ -204,6 +205,7 @@ fn held_out(
                         max_iterations: FOLD_ITERATIONS,
                         tolerance: 0.05,
                         tiles: false,
+                        settle: false,
                         progress: &quiet,
                     },
                 )

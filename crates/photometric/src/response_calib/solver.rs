@@ -656,6 +656,9 @@ pub(super) struct Settings<'a> {
     pub tolerance: f64,
     /// Compute the per-tile gradients in the last pass.
     pub tiles: bool,
+    /// Also stop when the iteration has settled within the standard errors (see
+    /// `within_noise`; it inverts the normal matrix every pass, which only pays on many pixels).
+    pub settle: bool,
     pub progress: &'a (dyn Fn(usize, f64) + Sync),
 }
 
@@ -887,7 +890,8 @@ pub(super) fn solve(
             2.. if !worse => (delta / change[change.len() - 2]).clamp(0.0, MAX_RATE),
             _ => MAX_RATE,
         };
-        let settled = !adapt
+        let settled = set.settle
+            && !adapt
             && !worse
             && within_noise(&u, &nu, 1.0 / (1.0 - rate), sums, pen, (k_first, k_last));
         if adapt {
