@@ -683,11 +683,11 @@ fn held_out_check<T: Sample>(
     Ok((Some(scores), None))
 }
 
-/// The grey-domain fit's table (`U(top) = 255`, continued beyond the data), its standard
-/// errors and their systematic part.
 /// A table, its standard errors and their systematic part.
 type Bands = (Vec<f64>, Vec<f64>, Vec<f64>);
 
+/// The grey-domain fit's table (`U(top) = 255`, continued beyond the data), its standard
+/// errors and their systematic part.
 fn grey_tables(fit: &Fit) -> Result<Bands, PhotometricError> {
     let nk = fit.u.len();
     let (first, last) = data_range(&fit.sums.used);
