@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 
 #[macro_use]
 mod out;
+mod alloc;
 mod cmd;
 mod interrupt;
 mod plot;
@@ -81,6 +82,7 @@ fn error_chain(e: &anyhow::Error) -> String {
 }
 
 fn main() -> ExitCode {
+    alloc::tune();
     interrupt::install();
     let cli = Cli::parse();
     let result = match cli.command {

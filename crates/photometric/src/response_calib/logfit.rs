@@ -59,7 +59,7 @@ fn observations(d: &Data<'_>, px: usize, out: &mut Vec<(usize, f64, f64, f64)>) 
     out.clear();
     let (s, lv, exposures) = (d.samples, d.levels, d.exposures);
     let n = lv.knots;
-    for (i, &v) in s.pixel(px).iter().enumerate() {
+    for (i, v) in s.pixel(px).iter().enumerate() {
         if (!d.all && s.is_excluded(px, i)) || d.train.is_some_and(|t| !t[i]) {
             continue;
         }
@@ -265,7 +265,7 @@ pub(super) fn grey_rmse(d: &Data<'_>, u: &[f64]) -> f64 {
             (d.all || !s.is_excluded(px, i)) && matches!(Obs::of(u32::from(v), lv), Obs::Value(_))
         };
         let (mut num, mut den, mut m) = (0.0, 0.0, 0);
-        for (i, &v) in vals.iter().enumerate() {
+        for (i, v) in vals.iter().enumerate() {
             if inside(i, v) {
                 num += exposures[i] * interp(u, lv.pos(u32::from(v)));
                 den += exposures[i] * exposures[i];
@@ -275,7 +275,7 @@ pub(super) fn grey_rmse(d: &Data<'_>, u: &[f64]) -> f64 {
         if m < 2 {
             continue;
         }
-        for (i, &v) in vals.iter().enumerate() {
+        for (i, v) in vals.iter().enumerate() {
             if inside(i, v) {
                 let (j, fr) = g.eval(exposures[i] * num / den);
                 let r = lv.pos(u32::from(v)) - (j as f64 + fr);

@@ -106,7 +106,8 @@ pub struct ResponseOptions {
     pub huber: f64,
     /// The pixel sample grows until the RMS sampling standard error of the determined
     /// `U(k)` is below this many grey values (on the `U(255) = 255` scale), up to every
-    /// pixel or half the frames' memory.
+    /// pixel or samples of a quarter of the frames' memory (8-bit frames; half of it for
+    /// deeper ones).
     pub target_std_error: f64,
     /// Most pixels drawn (0: every pixel if the standard errors need them).
     pub max_pixels: usize,
@@ -427,7 +428,8 @@ fn fit_growing<T: Sample>(
     progress: &(dyn Fn(usize, f64) + Sync),
 ) -> Result<Grown, PhotometricError> {
     let available = scan.order.len();
-    // the samples (two bytes per value) stay within half the frames' memory
+    // the samples stay within a quarter of the frames' memory with a byte per value of 8-bit
+    // frames, within half of it with two bytes per value of deeper ones
     let (w, h) = frames[0].size();
     let memory_cap = (w * h * std::mem::size_of::<T>() / 4).max(2 * FIRST_DRAW);
     let limit = if options.max_pixels == 0 {

@@ -138,8 +138,8 @@ pub(super) fn scan<T: Sample>(frames: &[Image<T>], top: u32) -> Scan {
 pub(super) struct Samples {
     /// Frames per pixel.
     pub frames: usize,
-    /// The values.
-    pub values: Vec<u16>,
+    /// The values: one byte each when the frames have 8 bits.
+    pub values: Values,
     /// One bit per value: excluded.
     pub excluded: Vec<u64>,
     /// The tile of each sampled pixel (the units of the standard errors).
@@ -154,7 +154,7 @@ impl Samples {
     pub fn empty(frames: usize) -> Samples {
         Samples {
             frames,
-            values: Vec::new(),
+            values: Values::U8(Vec::new()),
             excluded: Vec::new(),
             tile: Vec::new(),
             rank: Vec::new(),
@@ -168,8 +168,12 @@ impl Samples {
 
     /// The values of pixel `p`.
     #[inline]
-    pub fn pixel(&self, p: usize) -> &[u16] {
-        &self.values[p * self.frames..(p + 1) * self.frames]
+    pub fn pixel(&self, p: usize) -> Pixel<'_> {
+        let r = p * self.frames..(p + 1) * self.frames;
+        match &self.values {
+            Values::U8(v) => Pixel::U8(&v[r]),
+            Values::U16(v) => Pixel::U16(&v[r]),
+        }
     }
 
     /// Whether the observation `i` of pixel `p` is excluded.
@@ -177,6 +181,54 @@ impl Samples {
     pub fn is_excluded(&self, p: usize, i: usize) -> bool {
         let k = p * self.frames + i;
         self.excluded[k / 64] >> (k % 64) & 1 == 1
+    }
+}
+
+/// The sampled values, pixel-major: bytes for 8-bit frames (the samples of a large draw are
+/// a good part of the memory), else 16 bits.
+pub(super) enum Values {
+    /// Values of 8-bit frames.
+    U8(Vec<u8>),
+    /// Values of deeper frames.
+    U16(Vec<u16>),
+}
+
+/// The values of one sampled pixel, one per frame.
+#[derive(Clone, Copy)]
+pub(super) enum Pixel<'a> {
+    /// Of 8-bit frames.
+    U8(&'a [u8]),
+    /// Of deeper frames.
+    U16(&'a [u16]),
+}
+
+impl<'a> Pixel<'a> {
+    /// The values in frame order.
+    #[inline]
+    pub fn iter(self) -> PixelValues<'a> {
+        match self {
+            Pixel::U8(s) => PixelValues::U8(s.iter()),
+            Pixel::U16(s) => PixelValues::U16(s.iter()),
+        }
+    }
+}
+
+/// The values of a [`Pixel`] in frame order.
+pub(super) enum PixelValues<'a> {
+    /// Of 8-bit frames.
+    U8(std::slice::Iter<'a, u8>),
+    /// Of deeper frames.
+    U16(std::slice::Iter<'a, u16>),
+}
+
+impl Iterator for PixelValues<'_> {
+    type Item = u16;
+    #[inline]
+    fn next(&mut self) -> Option<u16> {
+        match self {
+            PixelValues::U8(it) => it.next().map(|&v| u16::from(v)),
+            PixelValues::U16(it) => it.next().copied(),
+        }
     }
 }
 
@@ -208,9 +260,38 @@ pub(super) fn draw<T: Sample>(
         .collect();
     chosen.sort_unstable_by_key(|&(p, _)| (tile_of(p), p));
     let nf = frames.len();
-    let mut values = vec![0u16; n * nf];
     // whole words of the bitset per chunk of 64 pixels
     let mut excluded = vec![0u64; (n * nf).div_ceil(64)];
+    let values = if top <= u32::from(u8::MAX) {
+        let mut v = vec![0u8; n * nf];
+        fill(frames, &chosen, &mut v, &mut excluded, top, radius, block);
+        Values::U8(v)
+    } else {
+        let mut v = vec![0u16; n * nf];
+        fill(frames, &chosen, &mut v, &mut excluded, top, radius, block);
+        Values::U16(v)
+    };
+    Samples {
+        frames: nf,
+        values,
+        excluded,
+        tile: chosen.iter().map(|&(p, _)| tile_of(p)).collect(),
+        rank: chosen.iter().map(|&(_, r)| r).collect(),
+    }
+}
+
+/// Fills the values of the `chosen` pixels (pixel-major) and the bits of the excluded ones.
+fn fill<T: Sample, V: TryFrom<u32> + Default + Copy + Send>(
+    frames: &[Image<T>],
+    chosen: &[(u32, u32)],
+    values: &mut [V],
+    excluded: &mut [u64],
+    top: u32,
+    radius: usize,
+    block: usize,
+) {
+    let (w, h) = frames[0].size();
+    let nf = frames.len();
     values
         .par_chunks_mut(nf * 64)
         .zip(excluded.par_chunks_mut(nf))
@@ -239,7 +320,8 @@ pub(super) fn draw<T: Sample>(
                                     .any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
                             })
                         });
-                    out[k * nf + i] = v as u16;
+                    // `v` is at most `top`, which fits `V`
+                    out[k * nf + i] = V::try_from(v).unwrap_or_default();
                     if near {
                         let b = k * nf + i;
                         bits[b / 64] |= 1 << (b % 64);
@@ -247,13 +329,6 @@ pub(super) fn draw<T: Sample>(
                 }
             }
         });
-    Samples {
-        frames: nf,
-        values,
-        excluded,
-        tile: chosen.iter().map(|&(p, _)| tile_of(p)).collect(),
-        rank: chosen.iter().map(|&(_, r)| r).collect(),
-    }
 }
 
 /// The tile side: [`TILE`], smaller for small frames so that there are at least 64 tiles.

@@ -307,7 +307,7 @@ fn fold_residuals(
         // the least-squares irradiance from the training values
         let (mut num, mut den) = (0.0, 0.0);
         let mut has = false;
-        for (i, &v) in vals.iter().enumerate() {
+        for (i, v) in vals.iter().enumerate() {
             if train[i] && inside(i, v) {
                 has = true;
                 if let Some(table) = u {
@@ -321,7 +321,7 @@ fn fold_residuals(
         if let (true, Some(g), Some(table)) = (grey_merge && b.is_finite(), &g, u) {
             for _ in 0..GREY_MERGE_STEPS {
                 let (mut jr, mut jj) = (0.0, 0.0);
-                for (i, &v) in vals.iter().enumerate() {
+                for (i, v) in vals.iter().enumerate() {
                     if train[i] && inside(i, v) {
                         let t = base.exposures[i];
                         let (j, mu) = predict(g, t, b);
@@ -341,7 +341,7 @@ fn fold_residuals(
                 b = (b + jr / jj).max(0.1 * b);
             }
         }
-        for (i, &v) in vals.iter().enumerate() {
+        for (i, v) in vals.iter().enumerate() {
             if fold[i] != f || !inside(i, v) || !has {
                 continue;
             }

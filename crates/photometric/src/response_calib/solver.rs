@@ -166,7 +166,7 @@ fn nll(obs: Obs, mu: f64, sd: f64, huber: f64) -> f64 {
 fn closed_form(p: &Problem<'_>, u: &[f64], px: usize) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     let s = p.samples;
-    for (i, &v) in s.pixel(px).iter().enumerate() {
+    for (i, v) in s.pixel(px).iter().enumerate() {
         let v = v as u32;
         if p.enters(i) && v > 0 && v < p.levels.clip && !s.is_excluded(px, i) {
             let t = p.exposures[i];
@@ -189,7 +189,7 @@ fn b_step(p: &Problem<'_>, m: &Model<'_>, px: usize, b: &mut f64) -> f64 {
     let inside = values
         .iter()
         .enumerate()
-        .filter(|&(i, &v)| {
+        .filter(|&(i, v)| {
             p.enters(i) && v > 0 && (v as u32) < p.levels.clip && !s.is_excluded(px, i)
         })
         .count();
@@ -207,7 +207,7 @@ fn b_step(p: &Problem<'_>, m: &Model<'_>, px: usize, b: &mut f64) -> f64 {
     let top = (p.levels.knots - 1) as f64;
     for _ in 0..m.b_steps {
         let (mut sjr, mut sjj) = (0.0, 0.0);
-        for (i, &v) in values.iter().enumerate() {
+        for (i, v) in values.iter().enumerate() {
             if !p.enters(i) || s.is_excluded(px, i) {
                 continue;
             }
@@ -283,7 +283,7 @@ fn pass_chunk(
             }
         }
         scratch.clear();
-        for (i, &v) in s.pixel(px).iter().enumerate() {
+        for (i, v) in s.pixel(px).iter().enumerate() {
             if !p.enters(i) || s.is_excluded(px, i) {
                 continue;
             }
@@ -561,7 +561,7 @@ fn initial_response(p: &Problem<'_>) -> Vec<f64> {
             let (mut num, mut den) = (0.0, 0.0);
             let vals = s.pixel(px);
             let ok = |i: usize, pos: f64| p.enters(i) && pos >= lo && pos <= hi;
-            for (i, &v) in vals.iter().enumerate() {
+            for (i, v) in vals.iter().enumerate() {
                 let pos = lv.pos(v as u32);
                 if ok(i, pos) {
                     let t = p.exposures[i];
@@ -573,7 +573,7 @@ fn initial_response(p: &Problem<'_>) -> Vec<f64> {
                 continue;
             }
             let b = num / den;
-            for (i, &v) in vals.iter().enumerate() {
+            for (i, v) in vals.iter().enumerate() {
                 let pos = lv.pos(v as u32);
                 if ok(i, pos) {
                     let j = (pos as usize).min(n - 2);
