@@ -163,9 +163,7 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
     } in configs(quick)
     {
         let mut opts = opts.clone();
-        if jpeg {
-            opts.saturation_block = 8;
-        }
+        opts.jpeg = jpeg;
         for (sw, sh, sn, big) in [(w, h, n, true), (320, 256, 12, false)] {
             let r = run(7, sw, sh, sn, sensor, curve, &opts)?;
             println!(

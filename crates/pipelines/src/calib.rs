@@ -1032,11 +1032,9 @@ pub fn calibrate_response_sequence(
             "iteration {i}, U changed by {change:.4} grey values"
         ));
     };
-    // JPEG frames: a clipped pixel rings through its 8x8 block
+    // JPEG frames: a saturated area decodes to values just under the top
     let mut options = job.options.clone();
-    if seq.is_jpeg() {
-        options.saturation_block = options.saturation_block.max(8);
-    }
+    options.jpeg |= seq.is_jpeg();
     let run = if seq.bits_per_sample() == 16 {
         let (frames, exposures, bits) = load_exposed_deep_frames(&seq, job.bit_depth, observer)?;
         let report = format!(

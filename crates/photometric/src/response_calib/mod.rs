@@ -88,10 +88,14 @@ pub struct ResponseOptions {
     /// Radius (pixels) of the neighbourhood of a saturated pixel whose observations are
     /// dropped.
     pub saturation_border: usize,
-    /// For JPEG frames, 8: the observations in a block (aligned, of this side) with a
-    /// saturated pixel are dropped too (each block is coded on its own, and a clipped pixel
-    /// rings through it). 0 or 1: none.
-    pub saturation_block: usize,
+    /// JPEG frames: values just under the top count as clipped (see [`JPEG_CLIP`]). The
+    /// 8x8 blocks around a saturated pixel are not dropped: whether a block holds a saturated
+    /// pixel depends on the block's shared compression error, and keeping only the blocks
+    /// without one kept the values near the top that the compression had lowered (on the
+    /// synthetic JPEG sweeps, the largest error of `U` fell from 0.53 to 0.30 grey values
+    /// without that rule; [`ResponseOptions::saturation_border`] still drops the ringing
+    /// next to a clipped pixel).
+    pub jpeg: bool,
     /// Grey values with fewer observations count as not determined by the data.
     pub min_count: u64,
     /// How observations are weighted: `auto` (by the measured noise unless uniform weights
@@ -123,7 +127,7 @@ impl Default for ResponseOptions {
             tolerance: 0.01,
             smoothness: 3.0,
             saturation_border: 2,
-            saturation_block: 0,
+            jpeg: false,
             min_count: 20,
             weighting: Weighting::Auto,
             choose_prior: true,
@@ -175,13 +179,6 @@ impl ResponseOptions {
             return bad(
                 "saturation_border",
                 self.saturation_border.to_string(),
-                "0 to 256 pixels",
-            );
-        }
-        if self.saturation_block > 256 {
-            return bad(
-                "saturation_block",
-                self.saturation_block.to_string(),
                 "0 to 256 pixels",
             );
         }
@@ -383,7 +380,7 @@ fn check_input<T: Sample>(
     Ok(distinct)
 }
 
-/// With JPEG frames (`saturation_block` set), values this many 8-bit grey values below the
+/// With JPEG frames ([`ResponseOptions::jpeg`]), values this many 8-bit grey values below the
 /// top count as clipped: a saturated area decodes to values just under the top (quality
 /// 90: 253 and 254 besides 255).
 const JPEG_CLIP: u32 = 2;
@@ -438,16 +435,7 @@ fn fit_growing<T: Sample>(
         options.max_pixels.min(available)
     }
     .min(memory_cap);
-    let draw_n = |n| {
-        draw(
-            frames,
-            scan,
-            base.levels.top,
-            options.saturation_border,
-            options.saturation_block,
-            n,
-        )
-    };
+    let draw_n = |n| draw(frames, scan, base.levels.top, options.saturation_border, n);
     let mut n = FIRST_DRAW.min(limit);
     let mut samples = draw_n(n);
     let mut start = Start::Cold;
@@ -526,7 +514,7 @@ fn calibrate<T: Sample>(
     options.check()?;
     // JPEG frames: values within JPEG_CLIP of the top count as clipped
     let levels = Levels {
-        clip: if options.saturation_block > 1 {
+        clip: if options.jpeg {
             levels.top - JPEG_CLIP * levels.top / 255
         } else {
             levels.top
@@ -662,14 +650,7 @@ fn held_out_check<T: Sample>(
     }
     // fewer pixels for longer sweeps: the check's cost grows with the observations
     let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-    let check = draw(
-        frames,
-        sc,
-        base.levels.top,
-        options.saturation_border,
-        options.saturation_block,
-        n,
-    );
+    let check = draw(frames, sc, base.levels.top, options.saturation_border, n);
     let (choice, scores) = select::choose(
         base,
         &check,

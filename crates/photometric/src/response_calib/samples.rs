@@ -234,14 +234,13 @@ impl Iterator for PixelValues<'_> {
 
 /// The first `n` pixels of the draw (all informative pixels when `n` is larger), their
 /// values ordered by tile, with the observations that have a saturated pixel of the same
-/// frame within `radius` or in the same aligned `block` (JPEG's 8x8; 0: none) excluded (a
-/// saturated value without one stays: it is a censored observation).
+/// frame within `radius` excluded (a saturated value without one stays: it is a censored
+/// observation).
 pub(super) fn draw<T: Sample>(
     frames: &[Image<T>],
     scan: &Scan,
     top: u32,
     radius: usize,
-    block: usize,
     n: usize,
 ) -> Samples {
     let (w, h) = frames[0].size();
@@ -264,11 +263,11 @@ pub(super) fn draw<T: Sample>(
     let mut excluded = vec![0u64; (n * nf).div_ceil(64)];
     let values = if top <= u32::from(u8::MAX) {
         let mut v = vec![0u8; n * nf];
-        fill(frames, &chosen, &mut v, &mut excluded, top, radius, block);
+        fill(frames, &chosen, &mut v, &mut excluded, top, radius);
         Values::U8(v)
     } else {
         let mut v = vec![0u16; n * nf];
-        fill(frames, &chosen, &mut v, &mut excluded, top, radius, block);
+        fill(frames, &chosen, &mut v, &mut excluded, top, radius);
         Values::U16(v)
     };
     Samples {
@@ -288,7 +287,6 @@ fn fill<T: Sample, V: TryFrom<u32> + Default + Copy + Send>(
     excluded: &mut [u64],
     top: u32,
     radius: usize,
-    block: usize,
 ) {
     let (w, h) = frames[0].size();
     let nf = frames.len();
@@ -307,18 +305,9 @@ fn fill<T: Sample, V: TryFrom<u32> + Default + Copy + Send>(
                     // a saturated neighbour excludes the value whatever the value is (also
                     // when it is saturated itself): excluding only the unsaturated values
                     // would keep the clipped ones preferentially and bias U near the top
-                    let near = (radius > 0
+                    let near = radius > 0
                         && (y0..=y1).any(|yy| {
                             (x0..=x1).any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
-                        }))
-                        || (block > 1 && {
-                            // JPEG codes each block on its own: a clipped pixel rings through
-                            // its whole block
-                            let (bx, by) = (x - x % block, y - y % block);
-                            (by..(by + block).min(h)).any(|yy| {
-                                (bx..(bx + block).min(w))
-                                    .any(|xx| (xx, yy) != (x, y) && d[yy * w + xx].raw() >= top)
-                            })
                         });
                     // `v` is at most `top`, which fits `V`
                     out[k * nf + i] = V::try_from(v).unwrap_or_default();
