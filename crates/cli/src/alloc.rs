@@ -5,7 +5,7 @@
 //! such block that is freed (up to 32 MiB). A decoder frees a frame-sized buffer early on, so
 //! the frames that a calibration keeps (1.3 MB each at 1280x1024) then come from the heap,
 //! between the decoders' short-lived buffers, whose freed space stays resident: a sweep of 120
-//! PNG frames peaked at 1.72x the frames' memory, 1.38x with a fixed threshold. Fixing the
+//! PNG frames peaked at 1.77x the frames' memory, 1.42x with a fixed threshold. Fixing the
 //! threshold also stops it from rising.
 
 /// The threshold: blocks of 1 MiB and more (a frame from 1024x1024 pixels up) get their own

@@ -88,13 +88,11 @@ pub struct ResponseOptions {
     /// Radius (pixels) of the neighbourhood of a saturated pixel whose observations are
     /// dropped.
     pub saturation_border: usize,
-    /// JPEG frames: values just under the top count as clipped (see [`JPEG_CLIP`]). The
-    /// 8x8 blocks around a saturated pixel are not dropped: whether a block holds a saturated
-    /// pixel depends on the block's shared compression error, and keeping only the blocks
-    /// without one kept the values near the top that the compression had lowered (on the
-    /// synthetic JPEG sweeps, the largest error of `U` fell from 0.53 to 0.30 grey values
-    /// without that rule; [`ResponseOptions::saturation_border`] still drops the ringing
-    /// next to a clipped pixel).
+    /// JPEG frames: values just under the top count as clipped (see [`JPEG_CLIP`]). Only
+    /// [`ResponseOptions::saturation_border`] drops values around a saturated pixel, not its
+    /// whole 8x8 block: whether a block holds a saturated pixel depends on the compression
+    /// error its pixels share, so keeping only the blocks without one would keep the values
+    /// that the compression lowered.
     pub jpeg: bool,
     /// Grey values with fewer observations count as not determined by the data.
     pub min_count: u64,
