@@ -88,7 +88,7 @@ pub struct ResponseOptions {
     /// Radius (pixels) of the neighbourhood of a saturated pixel whose observations are
     /// dropped.
     pub saturation_border: usize,
-    /// JPEG frames: values just under the top count as clipped (see [`JPEG_CLIP`]). Only
+    /// JPEG frames: values within 2 grey values of the top (8-bit) count as clipped. Only
     /// [`ResponseOptions::saturation_border`] drops values around a saturated pixel, not its
     /// whole 8x8 block: whether a block holds a saturated pixel depends on the compression
     /// error its pixels share, so keeping only the blocks without one would keep the values
