@@ -26,6 +26,10 @@ left-out value in 1..254 and at least one other frame with a value in 1..254):
           paper's least-squares irradiance); RMS of I_j - G(t_j B) in grey levels
     tri   the same with Debevec's triangle weights h(z) = min(z, 255 - z): B =
           sum h t U / sum h t^2, and the squared errors weighted by h(I_j)
+    ml    as ls, but B by least squares in grey levels, min sum (I - G(t B))^2 over
+          the same values (Gauss-Newton from the ls B): every table predicts through the
+          merge that suits it best, so the score measures the table and not the noise
+          that the ls merge carries from the steep top of U into B
 G = U^-1 is the piecewise-linear inverse of the table (made non-decreasing first),
 clamped to 0..255.
 
@@ -137,8 +141,29 @@ def inverse(u, e):
     return np.clip(np.interp(e, m, np.arange(256, dtype=np.float64)), 0.0, 255.0)
 
 
+def grey_merge(stack, t, ok, u, b):
+    """B of every pixel by least squares in grey levels, min sum ok (I - G(t B))^2, by
+    Gauss-Newton steps from `b` (each kept above a tenth of the previous B)."""
+    m = np.maximum.accumulate(u)
+    codes = np.arange(256, dtype=np.float64)
+    for _ in range(GREY_MERGE_STEPS):
+        g = np.clip(np.interp(t * b[None], m, codes), 0.0, 255.0)
+        j = np.clip(np.floor(g).astype(np.int64), 0, 254)
+        du = m[j + 1] - m[j]
+        live = (g > 0.0) & (g < 255.0) & (du > 0.0)
+        d = np.where(live, t / np.where(du > 0.0, du, 1.0), 0.0) * ok
+        jr = (d * (stack - g) * ok).sum(0)
+        jj = (d * d).sum(0)
+        step = np.where(jj > 0.0, jr / np.where(jj > 0.0, jj, 1.0), 0.0)
+        b = np.maximum(b + step, 0.1 * b)
+    return b
+
+
+GREY_MERGE_STEPS = 8
+
+
 def fold_errors(frames, times, train, test, u):
-    """(sse_ls, n_ls, sse_tri, wsum_tri) of one fold."""
+    """(sse_ls, n_ls, sse_tri, wsum_tri, sse_ml) of one fold."""
     stack = np.stack([frames[i] for i in train]).astype(np.int32)
     t = np.array([times[i] for i in train])[:, None, None]
     ok = (stack >= 1) & (stack <= 254)
@@ -150,7 +175,10 @@ def fold_errors(frames, times, train, test, u):
     num_tri = (h * t * uv).sum(0)
     den_tri = (h * t * t).sum(0)
     has = ok.any(0)
-    out = [0.0, 0, 0.0, 0.0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b_ml = grey_merge(stack.astype(np.float64), t, okf, u,
+                          np.where(has, num_ls / den_ls, 0.0))
+    out = [0.0, 0, 0.0, 0.0, 0.0]
     for j in test:
         obs = frames[j].astype(np.float64)
         mask = has & (frames[j] >= 1) & (frames[j] <= 254)
@@ -159,11 +187,13 @@ def fold_errors(frames, times, train, test, u):
         o = obs[mask]
         r_ls = o - inverse(u, times[j] * b_ls)
         r_tri = o - inverse(u, times[j] * b_tri)
+        r_ml = o - inverse(u, times[j] * b_ml[mask])
         w = np.minimum(o, 255 - o)
         out[0] += float(r_ls @ r_ls)
         out[1] += int(mask.sum())
         out[2] += float((w * r_tri) @ r_tri)
         out[3] += float(w.sum())
+        out[4] += float(r_ml @ r_ml)
     return out
 
 
@@ -185,7 +215,7 @@ def score_set(folder, args):
     gs = groups(times)
     methods = (["monovo"] if args.monovo else []) + (
         [] if args.no_peers else ["debevec", "robertson"] + (["tum2016"] if args.tum2016 else []))
-    acc = {m: [0.0, 0, 0.0, 0.0] for m in methods}
+    acc = {m: [0.0, 0, 0.0, 0.0, 0.0] for m in methods}
     failed = {m: [] for m in methods}
     tables = {m: [] for m in methods}
     for e, test in gs:
@@ -209,7 +239,7 @@ def score_set(folder, args):
                 continue
             tables[m].append([float(x) for x in u])
             r = fold_errors(frames, times, train, test, u)
-            for k in range(4):
+            for k in range(5):
                 acc[m][k] += r[k]
     h, w = frames[0].shape
     res = {"frames": len(frames), "exposures": len(gs), "size": [w, h], "methods": {}}
@@ -219,6 +249,7 @@ def score_set(folder, args):
         res["methods"][m] = {
             "ls": float(np.sqrt(a[0] / a[1])) if ok and a[1] else None,
             "tri": float(np.sqrt(a[2] / a[3])) if ok and a[3] else None,
+            "ml": float(np.sqrt(a[4] / a[1])) if ok and a[1] else None,
             "pixels": a[1],
             "failed_folds": failed[m],
             "tables": tables[m],
@@ -248,7 +279,7 @@ def main():
         "tum2016": "tum-vision/mono_dataset_code responseCalib" if args.tum2016 else None,
         "sets": {},
     }
-    print(f"{'set':<24} {'method':<10} {'ls':>8} {'tri':>8}  failed folds")
+    print(f"{'set':<24} {'method':<10} {'ls':>8} {'tri':>8} {'ml':>8}  failed folds")
     for folder in args.sets:
         name = os.path.basename(os.path.normpath(folder))
         res = score_set(folder, args)
@@ -258,7 +289,8 @@ def main():
         out["sets"][name] = res
         for m, r in res["methods"].items():
             f = lambda v: "-" if v is None else f"{v:.3f}"
-            print(f"{name:<24} {m:<10} {f(r['ls']):>8} {f(r['tri']):>8}  {len(r['failed_folds'])}")
+            print(f"{name:<24} {m:<10} {f(r['ls']):>8} {f(r['tri']):>8} {f(r['ml']):>8}"
+                  f"  {len(r['failed_folds'])}")
         sys.stdout.flush()
     if args.json:
         tmp = args.json + ".tmp"

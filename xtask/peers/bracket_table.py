@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Turns the printed tables of bracket_scores.py into docs/response_brackets.json and the
-Markdown table of docs/response-brackets.md.
+Markdown tables of docs/response-brackets.md (one per score: `ls`, and `ml` where the
+printed tables have it).
 
     python3 xtask/peers/bracket_table.py peers.txt monovo.txt --versions "..." \
         --json docs/response_brackets.json > table.md
@@ -18,10 +19,32 @@ def read(paths):
             c = line.split()
             if len(c) < 5 or c[0] == "set":
                 continue
-            ls = None if c[2] == "-" else float(c[2])
-            tri = None if c[3] == "-" else float(c[3])
-            scores.setdefault(c[0], {})[c[1]] = {"ls": ls, "tri": tri, "failed_folds": int(c[4])}
+            num = lambda v: None if v == "-" else float(v)
+            row = {"ls": num(c[2]), "tri": num(c[3])}
+            if len(c) >= 6:
+                row["ml"] = num(c[4])
+            row["failed_folds"] = int(c[-1])
+            scores.setdefault(c[0], {})[c[1]] = row
     return scores
+
+
+def table(s, score):
+    """The Markdown table of one score."""
+    print("| set | monovo | Debevec | Robertson | 2016 tool | best peer | monovo / best peer "
+          "| monovo / best OpenCV |")
+    print("|---|---:|---:|---:|---:|---|---:|---:|")
+    for name in sorted(s):
+        m = s[name]
+        get = lambda k: m.get(k, {}).get(score)
+        fmt = lambda k: "fails" if get(k) is None else f"{get(k):.2f}"
+        peers = [(get(k), k) for k in PEERS if get(k) is not None]
+        best = min(peers) if peers else (None, "-")
+        mono = get("monovo")
+        opencv = [get(k) for k in PEERS[:2] if get(k) is not None]
+        ratio = "-" if mono is None or best[0] is None else f"{mono / best[0]:.3f}"
+        ratio_cv = "-" if mono is None or not opencv else f"{mono / min(opencv):.3f}"
+        print(f"| {name} | {fmt('monovo')} | {fmt('debevec')} | {fmt('robertson')} | "
+              f"{fmt('tum2016')} | {best[1]} | {ratio} | {ratio_cv} |")
 
 
 def main():
@@ -35,20 +58,10 @@ def main():
         with open(a.json, "w") as fh:
             json.dump({"versions": a.versions, "sets": s}, fh, indent=1, sort_keys=True)
             fh.write("\n")
-    print("| set | monovo | Debevec | Robertson | 2016 tool | best peer | monovo / best peer "
-          "| monovo / best OpenCV |")
-    print("|---|---:|---:|---:|---:|---|---:|---:|")
-    for name in sorted(s):
-        m = s[name]
-        fmt = lambda k: "fails" if m.get(k, {}).get("ls") is None else f"{m[k]['ls']:.2f}"
-        peers = [(m[k]["ls"], k) for k in PEERS if m.get(k, {}).get("ls") is not None]
-        best = min(peers) if peers else (None, "-")
-        mono = m.get("monovo", {}).get("ls")
-        opencv = [m[k]["ls"] for k in PEERS[:2] if m.get(k, {}).get("ls") is not None]
-        ratio = "-" if mono is None or best[0] is None else f"{mono / best[0]:.3f}"
-        ratio_cv = "-" if mono is None or not opencv else f"{mono / min(opencv):.3f}"
-        print(f"| {name} | {fmt('monovo')} | {fmt('debevec')} | {fmt('robertson')} | "
-              f"{fmt('tum2016')} | {best[1]} | {ratio} | {ratio_cv} |")
+    table(s, "ls")
+    if any("ml" in r for m in s.values() for r in m.values()):
+        print()
+        table(s, "ml")
 
 
 if __name__ == "__main__":
