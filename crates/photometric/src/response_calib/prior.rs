@@ -106,8 +106,8 @@ fn quadratic_coefficients(lo: usize, hi: usize, at: f64) -> Option<Vec<f64>> {
 /// Jacobian of that map. Above the data, `log U` is continued by the quadratic fitted to the
 /// `EXTRAPOLATION_WINDOW` values below `last` (camera responses are close to powers and
 /// exponentials, which a quadratic in `log U` follows far better than one in `U`), offset to
-/// meet `U(last)`; below, `U` itself is continued the same way (it goes to 0 there). The
-/// result is kept at or above 0 and strictly increasing.
+/// meet `U(last)`; below, `U` itself is continued the same way (it goes to 0 there), with
+/// `U(0) = 0` held. The result is kept at or above 0 and strictly increasing.
 pub(super) fn extrapolate(u: &[f64], first: usize, last: usize) -> (Vec<f64>, DMatrix<f64>) {
     extrapolate_with(u, first, last, EXTRAPOLATION_WINDOW)
 }
@@ -181,6 +181,13 @@ pub(super) fn extrapolate_with(
             }
         }
     }
+    if first > 0 {
+        // the model's U(0) = 0 (no light reads 0), whatever the continuation says
+        out[0] = 0.0;
+        for c in 0..n {
+            jac[(0, c)] = 0.0;
+        }
+    }
     for v in out.iter_mut() {
         *v = v.max(0.0);
     }
@@ -219,5 +226,39 @@ pub(super) fn make_monotone(u: &mut [f64], weight: &[f64]) {
         if u[k] <= u[k - 1] {
             u[k] = u[k - 1] + eps;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{extrapolate, make_monotone};
+
+    fn strictly_increasing(u: &[f64]) -> bool {
+        u.windows(2).all(|w| w[1] > w[0])
+    }
+
+    #[test]
+    fn monotone_pools_violators_by_weight() {
+        let mut u = vec![0.0, 3.0, 1.0, 4.0];
+        make_monotone(&mut u, &[1.0, 1.0, 3.0, 1.0]);
+        // 3 and 1 pool to their weighted mean 1.5, then the tie is separated
+        assert_eq!(u[0], 0.0);
+        assert!((u[1] - 1.5).abs() < 1e-12 && u[2] > u[1] && u[2] - u[1] < 1e-3);
+        assert_eq!(u[3], 4.0);
+    }
+
+    #[test]
+    fn the_continuation_below_the_data_keeps_u0_at_zero() {
+        // data from grey value 10 on, on a line that meets 0 at -90: the continuation reaches
+        // 91..99 at 1..9, but U(0) stays 0 (no light reads 0)
+        let u: Vec<f64> = (0..256).map(|k| 100.0 + k as f64).collect();
+        let (out, jac) = extrapolate(&u, 10, 255);
+        assert_eq!(out[0], 0.0);
+        assert!((out[5] - 105.0).abs() < 1e-6, "{}", out[5]);
+        assert!(strictly_increasing(&out));
+        assert!((0..256).all(|c| jac[(0, c)] == 0.0));
+        // with data down to 0, the table is left alone
+        let (same, _) = extrapolate(&u, 0, 255);
+        assert_eq!(same, u);
     }
 }
