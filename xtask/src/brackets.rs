@@ -8,7 +8,9 @@
 //! exposures; every pixel's irradiance is merged from those frames, `B = sum t U(I) / sum t^2`
 //! over their values in 1..254; the left-out values in 1..254 (of pixels with a merged `B`)
 //! are predicted as `G(t_j B)`. `ls` is the pooled RMS error in grey levels, `tri` the same
-//! with Debevec's triangle weights `min(z, 255 - z)` in the merge and on the errors.
+//! with Debevec's triangle weights `min(z, 255 - z)` in the merge and on the errors, `ml` the
+//! same as `ls` with `B` merged by least squares in grey levels (`min sum (I - G(t B))^2`,
+//! Gauss-Newton from the `ls` value): the merge that suits each table.
 
 use std::path::{Path, PathBuf};
 
@@ -37,7 +39,36 @@ fn inverse(u: &[f64], e: f64) -> f64 {
     (k - 1) as f64 + if b > a { (e - a) / (b - a) } else { 0.0 }
 }
 
-/// Pooled sums of one fold: (squared errors, count, weighted squared errors, weights).
+/// `B` by least squares in grey levels over the pixel's training values `(t, I)`, by
+/// [`GREY_MERGE_STEPS`] Gauss-Newton steps from `b` (each kept above a tenth of the last `B`),
+/// through the non-decreasing table `m`.
+fn grey_merge(m: &[f64], values: &[(f64, f64)], mut b: f64) -> f64 {
+    let top = (m.len() - 1) as f64;
+    for _ in 0..GREY_MERGE_STEPS {
+        let (mut jr, mut jj) = (0.0, 0.0);
+        for &(t, v) in values {
+            let g = inverse(m, t * b);
+            let j = (g.floor() as usize).min(m.len() - 2);
+            let du = m[j + 1] - m[j];
+            if g > 0.0 && g < top && du > 0.0 {
+                let d = t / du;
+                jr += d * (v - g);
+                jj += d * d;
+            }
+        }
+        if jj <= 0.0 {
+            break;
+        }
+        b = (b + jr / jj).max(0.1 * b);
+    }
+    b
+}
+
+/// Gauss-Newton steps of the grey-level merge (as `bracket_scores.py`).
+const GREY_MERGE_STEPS: usize = 8;
+
+/// Pooled sums of one fold: (squared errors, count, weighted squared errors, weights, squared
+/// errors through the grey-level merge).
 #[allow(clippy::needless_range_loop)]
 fn fold_sums(
     frames: &[&[u8]],
@@ -45,16 +76,18 @@ fn fold_sums(
     train: &[usize],
     test: &[usize],
     u: &[f64],
-) -> [f64; 4] {
+) -> [f64; 5] {
     let mut m = u.to_vec();
     for k in 1..m.len() {
         m[k] = m[k].max(m[k - 1]);
     }
     let ok = |v: u8| (1..=254).contains(&v);
     let hat = |v: u8| f64::from(v.min(255 - v));
-    let mut out = [0.0; 4];
+    let mut out = [0.0; 5];
+    let mut values = Vec::with_capacity(train.len());
     for p in 0..frames[0].len() {
         let (mut n_ls, mut d_ls, mut n_tri, mut d_tri, mut has) = (0.0, 0.0, 0.0, 0.0, false);
+        values.clear();
         for &i in train {
             let v = frames[i][p];
             if ok(v) {
@@ -64,12 +97,14 @@ fn fold_sums(
                 d_ls += t * t;
                 n_tri += hat(v) * t * uv;
                 d_tri += hat(v) * t * t;
+                values.push((t, f64::from(v)));
                 has = true;
             }
         }
         if !has {
             continue;
         }
+        let b_ml = grey_merge(&m, &values, n_ls / d_ls);
         for &j in test {
             let v = frames[j][p];
             if !ok(v) {
@@ -84,13 +119,15 @@ fn fold_sums(
                 out[2] += hat(v) * r * r;
             }
             out[3] += hat(v);
+            let r_ml = o - inverse(&m, times[j] * b_ml);
+            out[4] += r_ml * r_ml;
         }
     }
     out
 }
 
-/// monovo's `(ls, tri)` on one bracket folder.
-pub fn score(folder: &Path) -> Result<(f64, f64)> {
+/// monovo's `(ls, tri, ml)` on one bracket folder.
+pub fn score(folder: &Path) -> Result<(f64, f64, f64)> {
     let seq = dataset_io::Sequence::open(folder).with_context(|| folder.display().to_string())?;
     let (frames, times) = load_exposed_frames(&seq, &Silent)?;
     // distinct exposures (relative tolerance 1e-6), each with its frames
@@ -104,7 +141,7 @@ pub fn score(folder: &Path) -> Result<(f64, f64)> {
         }
     }
     let data: Vec<&[u8]> = frames.iter().map(|f| f.data()).collect();
-    let mut acc = [0.0; 4];
+    let mut acc = [0.0; 5];
     for test in &groups {
         let train: Vec<usize> = (0..frames.len()).filter(|i| !test.contains(i)).collect();
         let mut sub: Vec<_> = train.iter().map(|&i| frames[i].clone()).collect();
@@ -118,26 +155,30 @@ pub fn score(folder: &Path) -> Result<(f64, f64)> {
                 )
             })?;
         let s = fold_sums(&data, &times, &train, test, cal.response.values());
-        for k in 0..4 {
+        for k in 0..5 {
             acc[k] += s[k];
         }
     }
-    Ok(((acc[0] / acc[1]).sqrt(), (acc[2] / acc[3]).sqrt()))
+    Ok((
+        (acc[0] / acc[1]).sqrt(),
+        (acc[2] / acc[3]).sqrt(),
+        (acc[4] / acc[1]).sqrt(),
+    ))
 }
 
-/// The peers' `ls` and `tri` of one set from `peer_scores.json`: the best of OpenCV's two
-/// methods, and of every peer that ran.
-fn peers(json: &serde_json::Value, set: &str) -> Result<[(f64, f64); 2]> {
+/// The peers' `ls`, `tri` and `ml` of one set from `peer_scores.json`: the best of OpenCV's
+/// two methods, and of every peer that ran.
+fn peers(json: &serde_json::Value, set: &str) -> Result<[(f64, f64, f64); 2]> {
     let methods = &json["sets"][set]["methods"];
     let get = |m: &str, k: &str| methods[m][k].as_f64();
-    let mut opencv = (f64::INFINITY, f64::INFINITY);
+    let mut opencv = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     let mut all = opencv;
     for m in ["debevec", "robertson", "tum2016"] {
-        if let (Some(ls), Some(tri)) = (get(m, "ls"), get(m, "tri")) {
+        if let (Some(ls), Some(tri), Some(ml)) = (get(m, "ls"), get(m, "tri"), get(m, "ml")) {
             if m != "tum2016" {
-                opencv = (opencv.0.min(ls), opencv.1.min(tri));
+                opencv = (opencv.0.min(ls), opencv.1.min(tri), opencv.2.min(ml));
             }
-            all = (all.0.min(ls), all.1.min(tri));
+            all = (all.0.min(ls), all.1.min(tri), all.2.min(ml));
         }
     }
     anyhow::ensure!(
@@ -148,7 +189,7 @@ fn peers(json: &serde_json::Value, set: &str) -> Result<[(f64, f64); 2]> {
 }
 
 /// The stage: per set, monovo's `ls` over the best OpenCV score (threshold 1: at least as good)
-/// and over the best of all peers.
+/// and over the best of all peers; `tri` and `ml` over the best OpenCV score.
 pub fn stage(_quick: bool) -> Result<Vec<Figure>> {
     let dir = fixtures();
     let path = dir.join("peer_scores.json");
@@ -168,11 +209,11 @@ pub fn stage(_quick: bool) -> Result<Vec<Figure>> {
             .and_then(|n| n.to_str())
             .unwrap_or("?")
             .to_string();
-        let (ls, tri) = score(&folder)?;
+        let (ls, tri, ml) = score(&folder)?;
         let [opencv, all] = peers(&json, &name)?;
         println!(
-            "brackets {name}: monovo ls {ls:.3} tri {tri:.3}; best OpenCV ls {:.3} tri {:.3}; best peer ls {:.3} tri {:.3}",
-            opencv.0, opencv.1, all.0, all.1
+            "brackets {name}: monovo ls {ls:.3} tri {tri:.3} ml {ml:.3}; best OpenCV ls {:.3} tri {:.3} ml {:.3}; best peer ls {:.3} tri {:.3} ml {:.3}",
+            opencv.0, opencv.1, opencv.2, all.0, all.1, all.2
         );
         figures.push(Figure::lower(
             &format!("brackets.{name}.ls_over_opencv"),
@@ -187,6 +228,11 @@ pub fn stage(_quick: bool) -> Result<Vec<Figure>> {
         figures.push(Figure::lower(
             &format!("brackets.{name}.tri_over_opencv"),
             tri / opencv.1,
+            "x",
+        ));
+        figures.push(Figure::lower(
+            &format!("brackets.{name}.ml_over_opencv"),
+            ml / opencv.2,
             "x",
         ));
     }
