@@ -152,7 +152,7 @@ def grey_merge(stack, t, ok, u, b):
         du = m[j + 1] - m[j]
         live = (g > 0.0) & (g < 255.0) & (du > 0.0)
         d = np.where(live, t / np.where(du > 0.0, du, 1.0), 0.0) * ok
-        jr = (d * (stack - g) * ok).sum(0)
+        jr = (d * (stack - g)).sum(0)
         jj = (d * d).sum(0)
         step = np.where(jj > 0.0, jr / np.where(jj > 0.0, jj, 1.0), 0.0)
         b = np.maximum(b + step, 0.1 * b)

@@ -86,7 +86,7 @@ fn fold_sums(
     let mut out = [0.0; 5];
     let mut values = Vec::with_capacity(train.len());
     for p in 0..frames[0].len() {
-        let (mut n_ls, mut d_ls, mut n_tri, mut d_tri, mut has) = (0.0, 0.0, 0.0, 0.0, false);
+        let (mut n_ls, mut d_ls, mut n_tri, mut d_tri) = (0.0, 0.0, 0.0, 0.0);
         values.clear();
         for &i in train {
             let v = frames[i][p];
@@ -98,10 +98,10 @@ fn fold_sums(
                 n_tri += hat(v) * t * uv;
                 d_tri += hat(v) * t * t;
                 values.push((t, f64::from(v)));
-                has = true;
             }
         }
-        if !has {
+        // no training value in 1..254: no merged B
+        if values.is_empty() {
             continue;
         }
         let b_ml = grey_merge(&m, &values, n_ls / d_ls);
