@@ -179,7 +179,12 @@ fn held_out(
         settle: false,
         progress: &quiet,
     };
-    let all = solve(base, Start::Cold, &fresh)?;
+    // the warm start of the fold fits (a cold check fits every fold from scratch and needs none)
+    let all = if cold {
+        None
+    } else {
+        Some(solve(base, Start::Cold, &fresh)?)
+    };
     // the folds are independent: fitted side by side, their residuals joined in fold order
     let per_fold: Vec<Vec<f32>> = (0..k)
         .into_par_iter()
@@ -190,10 +195,9 @@ fn held_out(
                 log_gap: ripple_period(base.exposures, Some(&train)),
                 ..*base
             };
-            let fit = if cold {
-                solve(&p, Start::Cold, &fresh)
-            } else {
-                solve(
+            let fit = match &all {
+                None => solve(&p, Start::Cold, &fresh),
+                Some(all) => solve(
                     &p,
                     Start::Warm {
                         u: all.u.clone(),
@@ -208,7 +212,7 @@ fn held_out(
                         settle: false,
                         progress: &quiet,
                     },
-                )
+                ),
             };
             let u = fit.ok().map(|f| f.u);
             let mut out = Vec::new();
