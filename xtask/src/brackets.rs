@@ -167,23 +167,21 @@ pub fn score(folder: &Path) -> Result<(f64, f64, f64)> {
 }
 
 /// The peers' `ls`, `tri` and `ml` of one set from `peer_scores.json`: the best of OpenCV's
-/// two methods, and of every peer that ran.
+/// two methods, and of every peer that ran; each score on its own (a peer without one still
+/// counts for the others).
 fn peers(json: &serde_json::Value, set: &str) -> Result<[(f64, f64, f64); 2]> {
     let methods = &json["sets"][set]["methods"];
-    let get = |m: &str, k: &str| methods[m][k].as_f64();
-    let mut opencv = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
-    let mut all = opencv;
-    for m in ["debevec", "robertson", "tum2016"] {
-        if let (Some(ls), Some(tri), Some(ml)) = (get(m, "ls"), get(m, "tri"), get(m, "ml")) {
-            if m != "tum2016" {
-                opencv = (opencv.0.min(ls), opencv.1.min(tri), opencv.2.min(ml));
-            }
-            all = (all.0.min(ls), all.1.min(tri), all.2.min(ml));
-        }
-    }
+    let best = |ms: &[&str], k: &str| {
+        ms.iter()
+            .filter_map(|m| methods[*m][k].as_f64())
+            .fold(f64::INFINITY, f64::min)
+    };
+    let scores = |ms: &[&str]| (best(ms, "ls"), best(ms, "tri"), best(ms, "ml"));
+    let opencv = scores(&["debevec", "robertson"]);
+    let all = scores(&["debevec", "robertson", "tum2016"]);
     anyhow::ensure!(
-        opencv.0.is_finite(),
-        "peer_scores.json: no OpenCV scores for {set}"
+        opencv.0.is_finite() && opencv.1.is_finite() && opencv.2.is_finite(),
+        "peer_scores.json: no OpenCV ls, tri and ml scores for {set}"
     );
     Ok([opencv, all])
 }
