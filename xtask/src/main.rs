@@ -15,6 +15,7 @@ mod fuzz;
 mod house;
 mod report;
 mod response;
+mod seeds;
 mod stages;
 mod vignette;
 
@@ -50,11 +51,12 @@ impl Figure {
 /// Runs every stage of bench-synthetic, or the one `only` names.
 fn run_stages(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
     type Stage = fn(bool) -> Result<Vec<Figure>>;
-    let stages: [(&str, Stage); 7] = [
+    let stages: [(&str, Stage); 8] = [
         ("camera", stages::camera),
         ("eval", stages::eval),
         ("rectify", stages::rectify),
         ("response", response::stage),
+        ("seeds", seeds::stage),
         ("brackets", brackets::stage),
         ("vignette", vignette::stage),
         ("demo", stages::demo),
@@ -100,7 +102,7 @@ fn usage() -> &'static str {
      tests/fixtures/brackets against the peers' scores), prints accuracy, speed and memory, and\n\
      fails when a figure is worse than xtask/thresholds.json. --quick is the CI variant\n\
      (smaller data, no demo stage); --only runs one stage: camera, eval, rectify, response,\n\
-     brackets, vignette or demo (monovo demo from start to end). --report docs/performance.md writes\n\
+     seeds, brackets, vignette or demo (monovo demo from start to end). --report docs/performance.md writes\n\
      the performance page from the run (machine, date, ratios, every figure).\n\
      fuzz feeds every parser arbitrary and mutated bytes and fails on a panic.\n\
      house fails on a source file over 1500 lines, a function over 150 lines or an import\n\

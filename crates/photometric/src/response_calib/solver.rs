@@ -21,7 +21,11 @@ pub(super) fn gauge(n: usize) -> usize {
 const B_BINS: usize = 256;
 
 /// Iterations during which the noise and the prior weight follow the data; then they are
-/// frozen, so that the iteration converges on a fixed problem.
+/// frozen, so that the iteration converges on a fixed problem. With measured weights the
+/// noise is measured for twice as long, and weights nothing during the first of them: the
+/// residuals of the starting point measure its misfit as much as the camera's noise, and
+/// weights taken from them can hold the fit in the wrong optimum (a misfit at the top read as
+/// noise there gives the top little weight, and it stays off).
 pub(super) const ADAPT_ITERATIONS: usize = 5;
 
 /// Steps taken back in a row after which the accepted state counts as converged.
@@ -663,8 +667,9 @@ pub(super) struct Settings<'a> {
 }
 
 /// The noise the weights use: the measured variance, or its median everywhere.
-fn noise_from(p: &Problem<'_>, m: &Measured) -> Noise {
-    if p.measured {
+/// The noise measured as `m`, weighting the observations by it (`measured`) or alike.
+fn weighted_noise(measured: bool, m: &Measured) -> Noise {
+    if measured {
         return Noise::measured(&m.per_knot);
     }
     let mut v: Vec<(f64, u64)> = m
@@ -786,6 +791,16 @@ fn within_noise(
         })
 }
 
+/// The iterations during which the noise is measured: twice [`ADAPT_ITERATIONS`] for a cold
+/// start with measured weights (the first half weights the observations alike).
+fn adapt_iterations(warm: bool, measured: bool) -> usize {
+    if !warm && measured {
+        2 * ADAPT_ITERATIONS
+    } else {
+        ADAPT_ITERATIONS
+    }
+}
+
 /// Runs the iteration.
 pub(super) fn solve(
     p: &Problem<'_>,
@@ -810,9 +825,10 @@ pub(super) fn solve(
     // accepted steps in a row that lowered the objective by less than OBJECTIVE_TOLERANCE
     let mut flat = 0;
     let max_iter = set.max_iterations.max(1);
+    let adapt_iterations = adapt_iterations(warm, p.measured);
     for it in 0..max_iter {
         iterations = it + 1;
-        let adapt = !warm && it < ADAPT_ITERATIONS;
+        let adapt = !warm && it < adapt_iterations;
         let (b_min, b_max) = b_range(&b, &u, p.exposures);
         let model = Model {
             fwd: Forward::new(&u),
@@ -896,7 +912,8 @@ pub(super) fn solve(
             && within_noise(&u, &nu, 1.0 / (1.0 - rate), sums, pen, (k_first, k_last));
         if adapt {
             if let Some(m) = measure(&sums.resid, clip_lo, clip_hi, floor) {
-                noise = noise_from(p, &m);
+                // measured weights only from the second half of the adaptation
+                noise = weighted_noise(p.measured && it + 1 >= ADAPT_ITERATIONS, &m);
                 measured = Some(m);
             }
         }
@@ -904,7 +921,7 @@ pub(super) fn solve(
         (set.progress)(iterations, delta);
         // converged: the step is below the tolerance, or no step improves the accepted state
         // any more (the objective's rounding and the B' steps' own error bound it)
-        if (!worse && delta < set.tolerance && (warm || it >= ADAPT_ITERATIONS))
+        if (!worse && delta < set.tolerance && (warm || it >= adapt_iterations))
             || settled
             || taken_back >= MAX_TAKEN_BACK
             || flat >= FLAT_STEPS
