@@ -90,19 +90,16 @@ pub fn stage(quick: bool) -> Result<Vec<Figure>> {
             )?;
             max.push(r.max);
         }
-        let mut sorted = max.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
-        let worst = sorted[sorted.len() - 1];
         let failures = max.iter().filter(|&&m| m > FAILURE_GREY).count();
+        let listed: Vec<String> = max.iter().map(|m| format!("{m:.2}")).collect();
+        // the upper of the two middle values for an even number of seeds
+        max.sort_by(f64::total_cmp);
+        let (median, worst) = (max[max.len() / 2], max[max.len() - 1]);
         println!(
             "  {:<18} {:>12} median {median:>7.3} worst {worst:>8.3} failures {failures}/{seeds}: {}",
             c.name,
             format!("{}x{}x{}", c.size.0, c.size.1, c.frames),
-            max.iter()
-                .map(|m| format!("{m:.2}"))
-                .collect::<Vec<_>>()
-                .join(" ")
+            listed.join(" ")
         );
         let key = |what: &str| format!("response.seeds.{}.{what}", c.name);
         figures.push(Figure::lower(&key("median_max_error"), median, "grey"));

@@ -666,8 +666,8 @@ pub(super) struct Settings<'a> {
     pub progress: &'a (dyn Fn(usize, f64) + Sync),
 }
 
-/// The noise the weights use: the measured variance, or its median everywhere.
-/// The noise measured as `m`, weighting the observations by it (`measured`) or alike.
+/// The noise the weights use: the variance measured as `m` (`measured`), or its median
+/// everywhere (the observations weighted alike).
 fn weighted_noise(measured: bool, m: &Measured) -> Noise {
     if measured {
         return Noise::measured(&m.per_knot);
