@@ -162,8 +162,11 @@ def grey_merge(stack, t, ok, u, b):
 GREY_MERGE_STEPS = 8
 
 
-def fold_errors(frames, times, train, test, u):
-    """(sse_ls, n_ls, sse_tri, wsum_tri, sse_ml) of one fold."""
+def fold_residuals(frames, times, train, test, u):
+    """The residuals of one fold on its scored pixels, one array per score, in the order of
+    the held-out frames: (r_ls, r_tri, h, r_ml, top), where h are the triangle weights of the
+    recorded values and top is each pixel's value in its longest training frame with a value
+    in 1..254 (the value that dominates the least-squares merge)."""
     stack = np.stack([frames[i] for i in train]).astype(np.int32)
     t = np.array([times[i] for i in train])[:, None, None]
     ok = (stack >= 1) & (stack <= 254)
@@ -175,26 +178,28 @@ def fold_errors(frames, times, train, test, u):
     num_tri = (h * t * uv).sum(0)
     den_tri = (h * t * t).sum(0)
     has = ok.any(0)
+    top = np.take_along_axis(stack, np.where(ok, t, -1.0).argmax(0)[None], 0)[0]
     with np.errstate(divide="ignore", invalid="ignore"):
         b_ml = grey_merge(stack.astype(np.float64), t, okf, u,
                           np.where(has, num_ls / den_ls, 0.0))
-    out = [0.0, 0, 0.0, 0.0, 0.0]
+    out = [[], [], [], [], []]
     for j in test:
         obs = frames[j].astype(np.float64)
         mask = has & (frames[j] >= 1) & (frames[j] <= 254)
-        b_ls = num_ls[mask] / den_ls[mask]
-        b_tri = num_tri[mask] / den_tri[mask]
         o = obs[mask]
-        r_ls = o - inverse(u, times[j] * b_ls)
-        r_tri = o - inverse(u, times[j] * b_tri)
-        r_ml = o - inverse(u, times[j] * b_ml[mask])
-        w = np.minimum(o, 255 - o)
-        out[0] += float(r_ls @ r_ls)
-        out[1] += int(mask.sum())
-        out[2] += float((w * r_tri) @ r_tri)
-        out[3] += float(w.sum())
-        out[4] += float(r_ml @ r_ml)
-    return out
+        out[0].append(o - inverse(u, times[j] * num_ls[mask] / den_ls[mask]))
+        out[1].append(o - inverse(u, times[j] * num_tri[mask] / den_tri[mask]))
+        out[2].append(np.minimum(o, 255 - o))
+        out[3].append(o - inverse(u, times[j] * b_ml[mask]))
+        out[4].append(top[mask])
+    return [np.concatenate(x) for x in out]
+
+
+def fold_errors(frames, times, train, test, u):
+    """(sse_ls, n_ls, sse_tri, wsum_tri, sse_ml) of one fold."""
+    r_ls, r_tri, w, r_ml, _ = fold_residuals(frames, times, train, test, u)
+    return [float(r_ls @ r_ls), int(r_ls.size), float((w * r_tri) @ r_tri), float(w.sum()),
+            float(r_ml @ r_ml)]
 
 
 def peers(us, frames, times, train, sub, work, args):
