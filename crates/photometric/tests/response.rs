@@ -37,13 +37,12 @@ fn frames(s: &Sweep) -> Vec<Image<u8>> {
 }
 
 fn calibrate(s: &Sweep) -> ResponseCalibration {
-    calibrate_response(
-        &mut frames(s),
-        &s.exposures_ms,
-        &ResponseOptions::default(),
-        &|_, _| {},
-    )
-    .unwrap()
+    // JPEG frames are declared, as `monovo calib response` does for a JPEG sequence
+    let opts = ResponseOptions {
+        jpeg: s.sensor.jpeg_quality.is_some(),
+        ..ResponseOptions::default()
+    };
+    calibrate_response(&mut frames(s), &s.exposures_ms, &opts, &|_, _| {}).unwrap()
 }
 
 /// The bars on a sweep of CI size (the full 1280x1024 x 120 sweeps run in `cargo xtask
@@ -315,5 +314,10 @@ fn log_domain_estimator_recovers_the_response_and_its_bias() {
     );
 }
 
-/// The log-domain fit's largest error between grey values 26 and 229 on a model sweep.
-const LOG_MID_MAX: f64 = 0.6;
+/// The log-domain fit's largest error between grey values 26 and 229 on a model sweep. It was
+/// 0.6 while the saturation border of lossless frames came from the frame itself; from the
+/// shorter exposure the fit also sees the values just below saturation (some of them saturated
+/// pixels that the noise after the clip put at 254), which its hat weights do not keep out:
+/// 0.99 on this sweep, still inside its standard errors (asserted below). The grey-domain fit,
+/// which models the clip, is the one the held-out check keeps on such data.
+const LOG_MID_MAX: f64 = 1.0;

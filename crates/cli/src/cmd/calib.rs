@@ -40,7 +40,10 @@ The model is the paper's, I = G(t B') + noise with G = U^-1, fitted by maximum l
 in grey values, with Newton steps in which each pixel's B' is eliminated:
   - saturated values (and values at 0) are censored observations: they enter through the
     probability that the noisy value clipped, so U is determined up to the top wherever long
-    exposures saturate; only a --saturation-border around saturated pixels is dropped;
+    exposures saturate; only a --saturation-border around saturated pixels is dropped
+    (around those of the same frame for JPEG frames, whose compression lowers the values
+    beside a highlight, and for frames deeper than 8 bits; of the next shorter exposure for
+    lossless 8-bit ones, so that the values just below saturation stay);
   - the noise variance per predicted grey value is measured from the residuals; --weighting
     auto (the default) weights by it unless uniform weights predict held-out exposures
     better (the choice and both scores are printed), measured or uniform force one;
@@ -171,9 +174,10 @@ pub struct ResponseArgs {
         ResponseOptions::default().max_pixels,
     ))]
     pub max_pixels: Option<usize>,
-    /// Radius (pixels) dropped around saturated pixels.
+    /// Radius (pixels) dropped around saturated pixels (of the same frame for JPEG and deeper
+    /// frames, of the next shorter exposure for lossless 8-bit ones).
     #[arg(long, value_name = "PX", help = with_default(
-        "Radius (pixels) dropped around saturated pixels",
+        "Radius (pixels) dropped around saturated pixels (of the same frame for JPEG and deeper frames, of the next shorter exposure for lossless 8-bit ones)",
         ResponseOptions::default().saturation_border,
     ))]
     pub saturation_border: Option<usize>,
