@@ -63,7 +63,7 @@ use crate::noise::{fit_noise, NoiseModel};
 use crate::{InverseResponse, PhotometricError};
 use measured::Measured;
 use prior::{data_range, extrapolate};
-use samples::{border_reference, draw, scan, Border, Levels, Sample, Samples};
+use samples::{draw, scan, Border, Levels, Sample, Samples};
 use solver::{solve, Fit, Problem, Settings, Start};
 use uncertainty::{normalized, standard_errors};
 
@@ -439,12 +439,8 @@ fn fit_growing<T: Sample>(
         options.max_pixels.min(available)
     }
     .min(memory_cap);
-    let reference = border_reference(base.exposures, own_border(options, base.levels.top));
-    let border = Border {
-        radius: options.saturation_border,
-        reference: &reference,
-    };
-    let draw_n = |n| draw(frames, scan, base.levels.top, border, n);
+    let border = saturation_border(options, base);
+    let draw_n = |n| draw(frames, scan, base.levels.top, &border, n);
     let mut n = FIRST_DRAW.min(limit);
     let mut samples = draw_n(n);
     let mut start = Start::Cold;
@@ -660,12 +656,13 @@ fn held_out_check<T: Sample>(
     }
     // fewer pixels for longer sweeps: the check's cost grows with the observations
     let n = (CHECK_OBSERVATIONS / frames.len()).clamp(1024, CHECK_PIXELS);
-    let reference = border_reference(base.exposures, own_border(options, base.levels.top));
-    let border = Border {
-        radius: options.saturation_border,
-        reference: &reference,
-    };
-    let check = draw(frames, sc, base.levels.top, border, n);
+    let check = draw(
+        frames,
+        sc,
+        base.levels.top,
+        &saturation_border(options, base),
+        n,
+    );
     let (choice, scores) = select::choose(
         base,
         &check,
@@ -688,6 +685,15 @@ fn held_out_check<T: Sample>(
 /// instead of 0.05, of 255).
 fn own_border(options: &ResponseOptions, top: u32) -> bool {
     options.jpeg || top > u32::from(u8::MAX)
+}
+
+/// The saturation border the fit uses ([`own_border`]).
+fn saturation_border(options: &ResponseOptions, base: &Problem<'_>) -> Border {
+    Border::new(
+        options.saturation_border,
+        base.exposures,
+        own_border(options, base.levels.top),
+    )
 }
 
 /// A table, its standard errors and their systematic part.
@@ -737,22 +743,11 @@ fn border_sensitivity<T: Sample>(
     if own_border(options, base.levels.top) || options.saturation_border == 0 {
         return Ok(None);
     }
-    let reference: Vec<usize> = (0..frames.len()).collect();
-    let border = Border {
-        radius: options.saturation_border,
-        reference: &reference,
-    };
-    let samples = draw(frames, scan, base.levels.top, border, grown.samples.len());
+    let border = Border::new(options.saturation_border, base.exposures, true);
+    let samples = draw(frames, scan, base.levels.top, &border, grown.samples.len());
     let p = Problem {
         samples: &samples,
-        exposures: base.exposures,
-        train: base.train,
-        levels: base.levels,
-        log_gap: base.log_gap,
-        smoothness: base.smoothness,
-        huber: base.huber,
-        measured: base.measured,
-        prior_scale: base.prior_scale,
+        ..*base
     };
     let fit = &grown.fit;
     let start = Start::Warm {

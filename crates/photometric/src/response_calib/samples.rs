@@ -234,10 +234,20 @@ impl Iterator for PixelValues<'_> {
 
 /// Where the saturation border of each frame comes from: `radius` pixels around the pixels
 /// saturated in frame `reference[i]` (see [`border_reference`]) are dropped from frame `i`.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Border<'a> {
+#[derive(Clone, Debug)]
+pub(super) struct Border {
     pub radius: usize,
-    pub reference: &'a [usize],
+    pub reference: Vec<usize>,
+}
+
+impl Border {
+    /// `radius` pixels around the saturated pixels of each frame's [`border_reference`].
+    pub fn new(radius: usize, exposures: &[f64], own: bool) -> Border {
+        Border {
+            radius,
+            reference: border_reference(exposures, own),
+        }
+    }
 }
 
 /// For each frame, the frame whose saturated pixels decide the border dropped around them.
@@ -283,7 +293,7 @@ pub(super) fn draw<T: Sample>(
     frames: &[Image<T>],
     scan: &Scan,
     top: u32,
-    border: Border<'_>,
+    border: &Border,
     n: usize,
 ) -> Samples {
     let (w, h) = frames[0].size();
@@ -329,7 +339,7 @@ fn fill<T: Sample, V: TryFrom<u32> + Default + Copy + Send>(
     values: &mut [V],
     excluded: &mut [u64],
     top: u32,
-    border: Border<'_>,
+    border: &Border,
 ) {
     let radius = border.radius;
     let (w, h) = frames[0].size();
@@ -405,12 +415,7 @@ mod tests {
             .collect();
         let sc = scan(&frames, 255);
         assert_eq!(sc.order.len(), 1);
-        let reference = border_reference(&t, own);
-        let border = Border {
-            radius: 1,
-            reference: &reference,
-        };
-        let s = draw(&frames, &sc, 255, border, 10);
+        let s = draw(&frames, &sc, 255, &Border::new(1, &t, own), 10);
         (0..3).map(|i| s.is_excluded(0, i)).collect()
     }
 
