@@ -44,6 +44,10 @@ in grey values, with Newton steps in which each pixel's B' is eliminated:
     (around those of the same frame for JPEG frames, whose compression lowers the values
     beside a highlight, and for frames deeper than 8 bits; of the next shorter exposure for
     lossless 8-bit ones, so that the values just below saturation stay);
+  - lossless 8-bit frames: the noise after the clip (a saturated pixel reading a little below
+    the top) is measured from the pixels saturated for sure, and the values near the top
+    enter through their exact likelihood under it (`noise_after_clip` in --json); not where
+    the saturated values do not look like such a noise (a camera that clips below the top);
   - the noise variance per predicted grey value is measured from the residuals; --weighting
     auto (the default) weights by it unless uniform weights predict held-out exposures
     better (the choice and both scores are printed), measured or uniform force one;
@@ -409,6 +413,7 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "prior_scale": cal.prior_scale,
                 "measured_noise": cal.measured_noise,
                 "noise": cal.noise,
+                "noise_after_clip": cal.noise_after_clip,
                 "prior_weight": cal.prior_weight,
                 "pixels_sampled": cal.pixels_sampled,
                 "pixels_available": cal.pixels_available,
@@ -517,12 +522,20 @@ fn noise_line(cal: &photometric::ResponseCalibration) -> String {
         ),
         _ => "not measured".into(),
     };
+    let after = if cal.noise_after_clip > 0.0 {
+        format!(
+            "; {:.2} after the clip (a saturated pixel reads the top plus this noise, rounded and clipped)",
+            cal.noise_after_clip
+        )
+    } else {
+        String::new()
+    };
     match &cal.noise {
         Some(m) => format!(
-            "noise measured from the residuals: {range}; shot/read/ADC model fitted to it: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2",
+            "noise measured from the residuals: {range}{after}; shot/read/ADC model fitted to it: read {:.3} U^2, shot {:.4} U per U, ADC {:.3} grey^2",
             m.read, m.shot, m.adc
         ),
-        None => format!("noise measured from the residuals: {range}"),
+        None => format!("noise measured from the residuals: {range}{after}"),
     }
 }
 

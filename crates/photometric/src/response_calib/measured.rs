@@ -5,6 +5,8 @@
 //! distribution (the values beyond it are censored): there the other side alone measures it
 //! (the median of the half-normal is the same).
 
+use super::model::normal_cdf;
+
 /// Bins of predicted values.
 pub(super) const BINS: usize = 32;
 
@@ -211,6 +213,90 @@ pub(super) fn measure(
     })
 }
 
+/// Bins of the values of pixels saturated for sure (the solver's `Sums::deep`): values 0 to 15 grey values below the top.
+pub(super) const DEEP_BINS: usize = 16;
+
+/// Predictions this many standard deviations beyond the top count as saturated for sure.
+pub(super) const DEEP_SD: f64 = 4.0;
+
+/// Of the values the saturation border drops, those of every this many pixels measure the
+/// noise after the clip.
+pub(super) const DEEP_STRIDE: usize = 8;
+
+/// Values of pixels saturated for sure needed to measure the noise after the clip.
+const DEEP_MIN: u64 = 200;
+
+/// The largest total-variation distance (plus `1 / sqrt(values)` for the sampling) between
+/// the values of saturated pixels and the noise fitted to them: beyond it the noise after the
+/// clip is not measured (the values do not look like one).
+const POST_MAX_DISTANCE: f64 = 0.05;
+
+/// A noise after the clip below this (grey values) counts as none.
+const POST_MIN: f64 = 0.1;
+
+/// The noise after the clip, in grey values, from the values of pixels saturated for sure
+/// (`deep`, by how far below the top they read): the maximum-likelihood standard deviation
+/// of a Gaussian noise added to the top, rounded and clipped there, given that the value is
+/// within the bins, with 1% of the values anywhere in them (moving objects, hot pixels).
+/// `None` with too few values, or values that such a noise does not describe
+/// ([`POST_MAX_DISTANCE`]).
+pub(super) fn post_clip_noise(deep: &[u64]) -> Option<f64> {
+    let total: u64 = deep.iter().sum();
+    if total < DEEP_MIN {
+        return None;
+    }
+    let last = deep.len() - 1;
+    let loglik = |sigma: f64| -> f64 {
+        // the probability of the bins: the value is within them
+        let inside = 1.0 - normal_cdf((-0.5 - last as f64) / sigma);
+        let mut l = 0.0;
+        for (k, &c) in deep.iter().enumerate() {
+            if c == 0 {
+                continue;
+            }
+            let kf = k as f64;
+            let prob = if k == 0 {
+                normal_cdf(0.5 / sigma)
+            } else {
+                normal_cdf((0.5 - kf) / sigma) - normal_cdf((-0.5 - kf) / sigma)
+            };
+            l += c as f64 * (0.99 * prob / inside + 0.01 / deep.len() as f64).ln();
+        }
+        l
+    };
+    // a fine grid in log sigma from 0.02 to 10 grey values (the likelihood is cheap)
+    let (mut best, mut best_l) = (0.0, f64::NEG_INFINITY);
+    for i in 0..=300 {
+        let sigma = 0.02 * (500f64).powf(i as f64 / 300.0);
+        let l = loglik(sigma);
+        if l > best_l {
+            best_l = l;
+            best = sigma;
+        }
+    }
+    // the values must look like that noise: a camera that clips below the top (many read
+    // one value under it, few the top) or spreads its highlights otherwise is not described
+    let inside = 1.0 - normal_cdf((-0.5 - last as f64) / best);
+    let distance: f64 = deep
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| {
+            let kf = k as f64;
+            let prob = if k == 0 {
+                normal_cdf(0.5 / best)
+            } else {
+                normal_cdf((0.5 - kf) / best) - normal_cdf((-0.5 - kf) / best)
+            };
+            (c as f64 / total as f64 - prob / inside).abs()
+        })
+        .sum::<f64>()
+        / 2.0;
+    if distance > POST_MAX_DISTANCE + 1.0 / (total as f64).sqrt() {
+        return None;
+    }
+    Some(if best < POST_MIN { 0.0 } else { best })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -246,5 +332,49 @@ mod tests {
             let got = m.per_knot[k];
             assert!((got / want - 1.0).abs() < 0.15, "{k}: {got} {want}");
         }
+    }
+
+    /// Counts of a Gaussian noise of `sigma` added to the top, rounded and clipped, in
+    /// [`DEEP_BINS`] bins.
+    fn clipped_counts(sigma: f64, n: f64) -> Vec<u64> {
+        (0..DEEP_BINS)
+            .map(|k| {
+                let kf = k as f64;
+                let p = if k == 0 {
+                    normal_cdf(0.5 / sigma)
+                } else {
+                    normal_cdf((0.5 - kf) / sigma) - normal_cdf((-0.5 - kf) / sigma)
+                };
+                (p * n).round() as u64
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_noise_after_the_clip_is_recovered_from_saturated_values() {
+        for sigma in [0.3, 0.5, 1.0, 2.0, 4.0] {
+            let got = post_clip_noise(&clipped_counts(sigma, 50_000.0)).expect("measured");
+            assert!((got - sigma).abs() < 0.03 * sigma + 0.02, "{sigma}: {got}");
+        }
+        // too few values: not measured
+        assert_eq!(post_clip_noise(&clipped_counts(1.0, 150.0)), None);
+        // (almost) every saturated pixel reads the top: none
+        let mut top = vec![0u64; DEEP_BINS];
+        top[0] = 10_000;
+        top[1] = 3;
+        assert_eq!(post_clip_noise(&top), Some(0.0));
+    }
+
+    #[test]
+    fn saturated_values_that_no_such_noise_describes_are_not_measured() {
+        // a camera that clips one value under the top (the saturated pixels of a Canon S45
+        // bracket: more read 254 than 255), and highlights spread flat over many values (the
+        // first six counts are those of a raw converter's night-street export)
+        let s45 = [4545, 5774, 414, 119, 28, 10, 9, 6, 3, 1, 2, 1, 0, 2, 0, 0];
+        assert_eq!(post_clip_noise(&s45), None);
+        let street = [
+            187, 153, 149, 101, 98, 131, 120, 90, 70, 60, 50, 40, 30, 20, 10, 5,
+        ];
+        assert_eq!(post_clip_noise(&street), None);
     }
 }

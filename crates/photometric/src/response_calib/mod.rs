@@ -253,6 +253,12 @@ pub struct ResponseCalibration {
     /// The shot/read/ADC model fitted to the measured noise (a description; in grey values,
     /// `U` on the `U(255) = 255` scale; `None` when it could not be fitted).
     pub noise: Option<NoiseModel>,
+    /// The noise after the clip, in grey values (0 when none was measured: JPEG and deeper
+    /// frames, and values of saturated pixels that such a noise does not describe): measured
+    /// from the values of pixels saturated for sure, which read the top plus this noise.
+    /// Values within its reach of the top enter as a mixture of a saturated pixel and an
+    /// unsaturated one.
+    pub noise_after_clip: f64,
     /// The estimator used: [`Estimator::Grey`] or [`Estimator::Log`] (then `weighting`,
     /// `noise` and `prior_scale` describe the grey-domain fit that determined the range, and
     /// `log_lambda` the prior of the table).
@@ -613,6 +619,7 @@ fn calibrate<T: Sample>(
         knot_step: 1.0 / levels.scale,
         measured_noise,
         noise,
+        noise_after_clip: fit.noise.post / levels.scale,
         estimator: if log_choice.is_some() {
             Estimator::Log
         } else {

@@ -101,6 +101,9 @@ pub enum Estimator {
 pub(super) struct Noise {
     pub sd: Vec<f64>,
     pub weight: Vec<f64>,
+    /// The noise after the clip (knots; 0 when none is measured): a saturated pixel reads
+    /// `top` plus this noise, so it can read a little below the top ([`value_term`]).
+    pub post: f64,
 }
 
 impl Noise {
@@ -109,6 +112,7 @@ impl Noise {
         Noise {
             sd: var.iter().map(|v| v.sqrt()).collect(),
             weight: var.iter().map(|v| 1.0 / v).collect(),
+            post: 0.0,
         }
     }
 
@@ -117,7 +121,13 @@ impl Noise {
         Noise {
             sd: var.iter().map(|v| v.sqrt()).collect(),
             weight: vec![1.0 / uniform; var.len()],
+            post: 0.0,
         }
+    }
+
+    /// The same noise with `post` (knots) after the clip.
+    pub fn with_post(self, post: f64) -> Noise {
+        Noise { post, ..self }
     }
 
     #[inline]
@@ -193,6 +203,200 @@ pub(super) fn term(obs: Obs, mu: f64, sd: f64, ivar: f64, huber: f64) -> (f64, f
     }
 }
 
+/// The likelihood near the top when a noise after the clip is measured (`post`, knots): a
+/// pixel's signal plus the noise before the clip (`s1`) saturates at the top `T`, then the
+/// noise after the clip is added and the value rounded and clipped. A saturated pixel can
+/// then read a little below the top, and a pixel just below saturation reads the top less
+/// often than one noise `sd` would say. Per code within reach of the noise after the clip
+/// (the top itself, counted as clipped, and the codes below it) and per prediction `mu` of the
+/// signal before the clip in `[T - 6 s1, T + 6 s1]`, a table of the exact negative log-likelihood, its slope and the share of
+/// the saturated branch (integrated over the noise before the clip); elsewhere the plain terms
+/// hold. Built once per pass.
+pub(super) struct TopModel {
+    top: f64,
+    sd: f64,
+    step: f64,
+    lo: f64,
+    dx: f64,
+    n: usize,
+    /// Codes tabulated: `top - d step` for `d` in `0..codes` (`d = 0` the clipped top).
+    codes: usize,
+    /// Per code and grid point: negative log-likelihood (a value's relative to its density,
+    /// as [`term`]'s are), its slope and curvature in `mu`, share of the saturated branch.
+    table: Vec<[f64; 4]>,
+}
+
+/// The smallest curvature weight of a near-top term (a plain value's is 1).
+const MIN_TOP_CURVATURE: f64 = 0.05;
+
+/// Grid points of [`TopModel`] per `s1`.
+const TOP_GRID: f64 = 20.0;
+
+impl TopModel {
+    /// The tables for the noise `sd` at the top (knots), `post` after the clip, codes `step`
+    /// knots wide, the top at `top`; `None` without a noise after the clip.
+    pub fn new(top: f64, sd: f64, post: f64, step: f64) -> Option<TopModel> {
+        if !(post > 0.0 && sd > 0.0 && step > 0.0) {
+            return None;
+        }
+        let s1 = (sd * sd - post * post).max(0.09 * sd * sd).sqrt();
+        let codes = ((6.0 * post / step).ceil() as usize + 1).clamp(2, 64);
+        let lo = top - 6.0 * s1;
+        let n = (12.0 * TOP_GRID) as usize + 1;
+        let dx = 12.0 * s1 / (n - 1) as f64;
+        // nodes over the signal `y` before the noise after the clip: where that noise reaches
+        // any tabulated code, and the prediction's noise reaches
+        let y_lo = (top - (codes as f64 - 0.5) * step - 7.0 * post).max(lo - 8.0 * s1);
+        let width = top - y_lo;
+        let intervals = ((width / s1.min(post) * 6.0).ceil() as usize).clamp(48, 4096) & !1;
+        let h = width / intervals as f64;
+        let ys: Vec<f64> = (0..=intervals).map(|i| y_lo + i as f64 * h).collect();
+        let simpson = |i: usize| -> f64 {
+            let c = if i == 0 || i == intervals {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            c * h / 3.0
+        };
+        let mut table = vec![[0.0; 4]; codes * n];
+        for d in 0..codes {
+            let v = top - d as f64 * step;
+            // the probability that the noise after the clip takes signal `y` to code `v`
+            let reach = |y: f64| -> f64 {
+                let upper = if d == 0 {
+                    1.0
+                } else {
+                    normal_cdf((v + 0.5 * step - y) / post)
+                };
+                (upper - normal_cdf((v - 0.5 * step - y) / post)).max(0.0)
+            };
+            let dy: Vec<f64> = ys
+                .iter()
+                .enumerate()
+                .map(|(i, &y)| reach(y) * simpson(i))
+                .collect();
+            let at_top = reach(top);
+            for i in 0..n {
+                let mu = lo + i as f64 * dx;
+                let (mut p, mut dp) = (0.0, 0.0);
+                for (&y, &w) in ys.iter().zip(&dy) {
+                    let z = (y - mu) / s1;
+                    let g = (-0.5 * z * z).exp() * 0.398_942_280_401_432_7 / s1;
+                    p += w * g;
+                    dp += w * g * z / s1;
+                }
+                let zt = (mu - top) / s1;
+                let sat = normal_cdf(zt) * at_top;
+                p += sat;
+                dp += (-0.5 * zt * zt).exp() * 0.398_942_280_401_432_7 / s1 * at_top;
+                let p = p.max(1e-300);
+                // a value's term is relative to its density (`0.5 z^2`), the top's a probability
+                let norm = if d == 0 {
+                    1.0
+                } else {
+                    (2.0 * std::f64::consts::PI).sqrt() * sd / step
+                };
+                table[d * n + i] = [-(p * norm).ln(), -dp / p, sat / p, 0.0];
+            }
+            // the curvature, from the exact slopes of the neighbouring points
+            let row = &mut table[d * n..(d + 1) * n];
+            for i in 0..n {
+                let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+                row[i][3] = (row[b][1] - row[a][1]) / ((b - a) as f64 * dx);
+            }
+        }
+        Some(TopModel {
+            top,
+            sd,
+            step,
+            lo,
+            dx,
+            n,
+            codes,
+            table,
+        })
+    }
+
+    /// The tabulated code of the value `v` (knots, `None` for the clipped top) and the grid
+    /// position of `mu` (the last point beyond the grid: saturated for sure); `None` outside
+    /// the tables.
+    #[inline]
+    fn locate(&self, v: Option<f64>, mu: f64) -> Option<(usize, usize, f64)> {
+        let d = match v {
+            None => 0,
+            Some(v) => {
+                // most values are far below the tabulated codes: one comparison
+                let d = (self.top - v) / self.step + 0.5;
+                if !(d >= 1.0 && d < self.codes as f64) {
+                    return None;
+                }
+                d as usize
+            }
+        };
+        let x = ((mu - self.lo) / self.dx).min((self.n - 1) as f64);
+        // below the grid, or NaN
+        if x.is_nan() || x < 0.0 {
+            return None;
+        }
+        let i = (x as usize).min(self.n - 2);
+        Some((d, i, x - i as f64))
+    }
+
+    /// The table at grid interval `i`, fraction `f`: the log-likelihood and its slope by cubic
+    /// Hermite interpolation (each with its exact derivative at the points: the objective stays
+    /// smooth and its slope consistent to the fourth order), the curvature and the share
+    /// linearly.
+    #[inline]
+    fn at(&self, d: usize, i: usize, f: f64) -> [f64; 4] {
+        let a = self.table[d * self.n + i];
+        let b = self.table[d * self.n + i + 1];
+        let h = self.dx;
+        let hermite = |y0: f64, m0: f64, y1: f64, m1: f64| {
+            let (f2, f3) = (f * f, f * f * f);
+            (2.0 * f3 - 3.0 * f2 + 1.0) * y0
+                + (f3 - 2.0 * f2 + f) * h * m0
+                + (-2.0 * f3 + 3.0 * f2) * y1
+                + (f3 - f2) * h * m1
+        };
+        [
+            hermite(a[0], a[1], b[0], b[1]),
+            hermite(a[1], a[3], b[1], b[3]),
+            a[3] + f * (b[3] - a[3]),
+            a[2] + f * (b[2] - a[2]),
+        ]
+    }
+
+    /// The Gauss-Newton terms `(w, r)` of [`term`] and the saturated share of a value `v`
+    /// (knots; `None`: the clipped top) whose signal before the clip is predicted at `raw`
+    /// (not clamped to the top: beyond it the pixel saturates more often), weighted as an
+    /// observation of variance `1 / ivar`; `None` where the plain terms hold. Beyond the grid
+    /// the pixel saturated for sure and the value says nothing (`w = 0`).
+    #[inline]
+    pub fn term(&self, v: Option<f64>, raw: f64, ivar: f64) -> Option<(f64, f64, f64)> {
+        let (d, i, f) = self.locate(v, raw)?;
+        if raw >= self.lo + (self.n - 1) as f64 * self.dx {
+            return Some((0.0, 0.0, 1.0));
+        }
+        let [_, slope, curv, share] = self.at(d, i, f);
+        // the observed curvature where the likelihood is convex, a small one where the mixture
+        // of the two branches is not (the damping of the steps handles those)
+        let w = (curv * self.sd * self.sd).max(MIN_TOP_CURVATURE);
+        // w r = ivar sd^2 (-slope): the objective is ivar sd^2 times the log-likelihood
+        Some((ivar * w, -slope * self.sd * self.sd / w, share))
+    }
+
+    /// The negative log-likelihood (as [`TopModel::term`] scales it), `None` where the plain
+    /// one holds.
+    #[inline]
+    pub fn nll(&self, v: Option<f64>, raw: f64) -> Option<f64> {
+        let (d, i, f) = self.locate(v, raw)?;
+        Some(self.at(d, i, f)[0])
+    }
+}
+
 /// The terms of `-log Phi(z)`, `z = (mu - c) / sd`: slope `-lambda / sd` and curvature
 /// `lambda (z + lambda) / sd^2` in `mu` (`lambda` the inverse Mills ratio); the slope bounded
 /// like a value's.
@@ -251,5 +455,59 @@ mod tests {
         assert!((w - 0.25).abs() < 0.01 && (r - 16.0).abs() < 0.6, "{w} {r}");
         let (w, _) = censored(6.0, 2.0, 0.25, f64::INFINITY);
         assert!(w < 1e-6);
+    }
+
+    /// The near-top likelihood against a simulation of the sensor it describes (noise before
+    /// the clip, the clip, noise after it, rounding), and its slope against finite differences.
+    #[test]
+    fn the_near_top_likelihood_is_the_sensor_s_probability_and_its_slope_is_exact() {
+        let (top, s1, post) = (255.0, 2.5f64, 1.0f64);
+        let sd = (s1 * s1 + post * post).sqrt();
+        let m = TopModel::new(top, sd, post, 1.0).expect("a model");
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut normal = || {
+            let (a, b) = (uniform().max(1e-300), uniform());
+            (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+        };
+        for mu in [249.0, 253.0, 255.0, 257.5] {
+            let n = 400_000;
+            let mut counts = [0u32; 4];
+            for _ in 0..n {
+                let y = (mu + s1 * normal()).min(top);
+                let v = (y + post * normal()).round().min(top);
+                let d = (top - v) as usize;
+                if d < 4 {
+                    counts[d] += 1;
+                }
+            }
+            for (d, &c) in counts.iter().enumerate() {
+                let v = if d == 0 { None } else { Some(top - d as f64) };
+                let l = m.nll(v, mu).expect("tabulated");
+                let norm = if d == 0 {
+                    1.0
+                } else {
+                    (2.0 * std::f64::consts::PI).sqrt() * sd
+                };
+                let p = (-l).exp() / norm;
+                let want = c as f64 / n as f64;
+                let tol = 4.0 * (want * (1.0 - want) / n as f64).sqrt() + 1e-3 * want;
+                assert!((p - want).abs() <= tol, "mu {mu} d {d}: {p} {want}");
+                // slope: r w / (ivar sd^2) is minus the slope
+                let h = 1e-3;
+                let fd =
+                    (m.nll(v, mu + h).expect("in") - m.nll(v, mu - h).expect("in")) / (2.0 * h);
+                let (w, r, _) = m.term(v, mu, 1.0).expect("in");
+                assert!(
+                    (-(w * r) / (sd * sd) - fd).abs() < 1e-3 * (1.0 + fd.abs()),
+                    "{mu} {d}"
+                );
+            }
+        }
     }
 }
