@@ -304,7 +304,8 @@ pub fn response_figure(
 }
 
 /// The noise of one observation per predicted grey value: measured from the residuals (the
-/// weights use it), and the shot/read/ADC model fitted to it (a description only).
+/// weights use it), the shot/read/ADC model fitted to it (a description only), and the noise
+/// after the clip where it was measured.
 fn noise_chart(cal: &photometric::ResponseCalibration, top: f64) -> Chart {
     let mut c = Chart::new(
         "noise of an observation",
@@ -321,7 +322,7 @@ fn noise_chart(cal: &photometric::ResponseCalibration, top: f64) -> Chart {
         .collect();
     if !measured.is_empty() {
         c.series
-            .push(Series::line("measured", measured, PALETTE[0]));
+            .push(Series::line("measured", measured.clone(), PALETTE[0]));
     }
     if let Some(m) = &cal.noise {
         let u = cal.response.table();
@@ -333,6 +334,15 @@ fn noise_chart(cal: &photometric::ResponseCalibration, top: f64) -> Chart {
             .collect();
         c.series
             .push(Series::line("shot/read/ADC model", model, PALETTE[3]).dashed());
+    }
+    if cal.noise_after_clip > 0.0 {
+        // measured on the saturated pixels, it is added after the response to every value:
+        // a floor under the measured noise; from 0, with room above for the legend
+        let sd = cal.noise_after_clip;
+        let highest = measured.iter().map(|p| p[1]).fold(sd, f64::max);
+        c.y_range = Some([0.0, 1.5 * highest]);
+        c.series
+            .push(Series::line("after the clip", vec![[0.0, sd], [top, sd]], PALETTE[2]).dotted());
     }
     c
 }
