@@ -213,7 +213,8 @@ pub(super) fn measure(
     })
 }
 
-/// Bins of the values of pixels saturated for sure (the solver's `Sums::deep`): values 0 to 15 grey values below the top.
+/// Bins of the values of pixels saturated for sure (the solver's `Sums::deep`): values 0 to
+/// 15 grey values below the top.
 pub(super) const DEEP_BINS: usize = 16;
 
 /// Predictions this many standard deviations beyond the top count as saturated for sure.
@@ -233,6 +234,17 @@ const POST_MAX_DISTANCE: f64 = 0.05;
 
 /// A noise after the clip below this (grey values) counts as none.
 const POST_MIN: f64 = 0.1;
+
+/// The probability that a Gaussian noise of `sigma` added to the top, rounded and clipped
+/// there, reads `k` values below the top.
+fn clipped_bin(k: usize, sigma: f64) -> f64 {
+    let kf = k as f64;
+    if k == 0 {
+        normal_cdf(0.5 / sigma)
+    } else {
+        normal_cdf((0.5 - kf) / sigma) - normal_cdf((-0.5 - kf) / sigma)
+    }
+}
 
 /// The noise after the clip, in grey values, from the values of pixels saturated for sure
 /// (`deep`, by how far below the top they read): the maximum-likelihood standard deviation
@@ -254,12 +266,7 @@ pub(super) fn post_clip_noise(deep: &[u64]) -> Option<f64> {
             if c == 0 {
                 continue;
             }
-            let kf = k as f64;
-            let prob = if k == 0 {
-                normal_cdf(0.5 / sigma)
-            } else {
-                normal_cdf((0.5 - kf) / sigma) - normal_cdf((-0.5 - kf) / sigma)
-            };
+            let prob = clipped_bin(k, sigma);
             l += c as f64 * (0.99 * prob / inside + 0.01 / deep.len() as f64).ln();
         }
         l
@@ -280,15 +287,7 @@ pub(super) fn post_clip_noise(deep: &[u64]) -> Option<f64> {
     let distance: f64 = deep
         .iter()
         .enumerate()
-        .map(|(k, &c)| {
-            let kf = k as f64;
-            let prob = if k == 0 {
-                normal_cdf(0.5 / best)
-            } else {
-                normal_cdf((0.5 - kf) / best) - normal_cdf((-0.5 - kf) / best)
-            };
-            (c as f64 / total as f64 - prob / inside).abs()
-        })
+        .map(|(k, &c)| (c as f64 / total as f64 - clipped_bin(k, best) / inside).abs())
         .sum::<f64>()
         / 2.0;
     if distance > POST_MAX_DISTANCE + 1.0 / (total as f64).sqrt() {
@@ -338,15 +337,7 @@ mod tests {
     /// [`DEEP_BINS`] bins.
     fn clipped_counts(sigma: f64, n: f64) -> Vec<u64> {
         (0..DEEP_BINS)
-            .map(|k| {
-                let kf = k as f64;
-                let p = if k == 0 {
-                    normal_cdf(0.5 / sigma)
-                } else {
-                    normal_cdf((0.5 - kf) / sigma) - normal_cdf((-0.5 - kf) / sigma)
-                };
-                (p * n).round() as u64
-            })
+            .map(|k| (clipped_bin(k, sigma) * n).round() as u64)
             .collect()
     }
 

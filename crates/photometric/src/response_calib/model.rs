@@ -102,7 +102,7 @@ pub(super) struct Noise {
     pub sd: Vec<f64>,
     pub weight: Vec<f64>,
     /// The noise after the clip (knots; 0 when none is measured): a saturated pixel reads
-    /// `top` plus this noise, so it can read a little below the top ([`value_term`]).
+    /// `top` plus this noise, so it can read a little below the top ([`TopModel`]).
     pub post: f64,
 }
 
@@ -209,9 +209,9 @@ pub(super) fn term(obs: Obs, mu: f64, sd: f64, ivar: f64, huber: f64) -> (f64, f
 /// then read a little below the top, and a pixel just below saturation reads the top less
 /// often than one noise `sd` would say. Per code within reach of the noise after the clip
 /// (the top itself, counted as clipped, and the codes below it) and per prediction `mu` of the
-/// signal before the clip in `[T - 6 s1, T + 6 s1]`, a table of the exact negative log-likelihood, its slope and the share of
-/// the saturated branch (integrated over the noise before the clip); elsewhere the plain terms
-/// hold. Built once per pass.
+/// signal before the clip in `[T - 6 s1, T + 6 s1]`, a table of the exact negative
+/// log-likelihood, its slope and the share of the saturated branch (integrated over the noise
+/// before the clip); elsewhere the plain terms hold. Built once per pass.
 pub(super) struct TopModel {
     top: f64,
     sd: f64,

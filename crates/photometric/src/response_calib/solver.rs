@@ -207,11 +207,11 @@ fn top_term(obs: Obs, raw: f64, ivar: f64, m: &Model<'_>) -> Option<(f64, f64, f
 
 /// The negative log-likelihood of an observation ([`nll`], [`TopModel::nll`]).
 #[inline]
-fn obs_nll(obs: Obs, raw: f64, mu: f64, sd: f64, p: &Problem<'_>, m: &Model<'_>) -> f64 {
+fn obs_nll(obs: Obs, mu: f64, sd: f64, p: &Problem<'_>, m: &Model<'_>) -> f64 {
     if let Some(top) = &m.top {
         let l = match obs {
-            Obs::Value(v) => top.nll(Some(v), raw),
-            Obs::Above(_) => top.nll(None, raw),
+            Obs::Value(v) => top.nll(Some(v), mu),
+            Obs::Above(_) => top.nll(None, mu),
             Obs::Below(_) => None,
         };
         if let Some(l) = l {
@@ -329,6 +329,8 @@ fn pass_chunk(
     // saturated pixels (the mixture measured worse there: a 12-bit gamma sweep at low noise
     // 0.136 of 255 off with it, 0.048 without)
     let lossless = p.levels.clip == p.levels.top && p.levels.top <= u32::from(u8::MAX);
+    // predictions beyond this are saturated for sure
+    let deep_from = top + DEEP_SD * m.noise.sd[n - 1];
     for (q, px) in range.enumerate() {
         let info = b_step(p, m, px, &mut b[q]);
         if info <= 0.0 {
@@ -363,13 +365,7 @@ fn pass_chunk(
                 // pixel saturated for sure); those of every DEEP_STRIDE-th pixel are plenty
                 if m.measure && lossless && px % DEEP_STRIDE == 0 && near_top_value(v, p) {
                     let (j, f) = m.fwd.eval(p.exposures[i] * bq);
-                    deep_value(
-                        &mut sums,
-                        j as f64 + f,
-                        top + DEEP_SD * m.noise.sd[n - 1],
-                        v,
-                        p,
-                    );
+                    deep_value(&mut sums, j as f64 + f, deep_from, v, p);
                 }
                 continue;
             }
@@ -387,9 +383,9 @@ fn pass_chunk(
             });
             if !m.measure {
                 // beyond the top as at the top: the U step sees no slope there
-                sums.objective += weight * sd * sd * obs_nll(obs, mu, mu, sd, p, m);
+                sums.objective += weight * sd * sd * obs_nll(obs, mu, sd, p, m);
             } else if lossless && near_top_value(v, p) {
-                deep_value(&mut sums, raw, top + DEEP_SD * m.noise.sd[n - 1], v, p);
+                deep_value(&mut sums, raw, deep_from, v, p);
             }
             // the residual of a value (the near-top terms' `r` is not one)
             let resid = match obs {
