@@ -33,6 +33,11 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert_eq!(v["converged"], true);
+    let stop = v["stop"].as_str().unwrap();
+    assert!(
+        ["tolerance", "settled", "no_improvement", "flat"].contains(&stop),
+        "{stop}"
+    );
     assert_eq!(v["std_error"].as_array().unwrap().len(), 256);
     // the standard errors beside the table: one line of 256 numbers
     let std_text = std::fs::read_to_string(d.join("pcalib_std.txt")).unwrap();

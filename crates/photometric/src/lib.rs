@@ -46,7 +46,7 @@ pub use noise::NoiseModel;
 pub use response::InverseResponse;
 pub use response_calib::{
     calibrate_response, calibrate_response_deep, CandidateScore, Estimator, HeldOutScores,
-    NoiseBin, ResponseCalibration, ResponseOptions, Weighting, DEFAULT_MAX_PIXELS, MAX_KNOTS,
+    NoiseBin, ResponseCalibration, ResponseOptions, Stop, Weighting, DEFAULT_MAX_PIXELS, MAX_KNOTS,
 };
 pub use smoothing::SmoothingChoice;
 pub use vignette::{vignette_errors, Vignette};

@@ -321,3 +321,34 @@ fn log_domain_estimator_recovers_the_response_and_its_bias() {
 /// 0.99 on this sweep, still inside its standard errors (asserted below). The grey-domain fit,
 /// which models the clip, is the one the held-out check keeps on such data.
 const LOG_MID_MAX: f64 = 1.0;
+
+/// A strongly compressive real curve (DoRF curve 14: its last ten grey values span a third of
+/// the irradiance) seen by the gain sensor, lossless. On this draw the first start (`U` above
+/// 245 a straight line at the mean slope) begins far below the top, and its iteration ends
+/// where no step lowers the objective, 60 grey values off. The second start continues `U` as
+/// a quadratic in `log U`, converges, and is taken: 3.5 grey values, nearly all of it the top's
+/// scale (`U(255)`, the least determined value of such a curve), and within 1 after the best
+/// scale.
+#[test]
+fn strongly_compressive_curve_is_found_from_the_second_start() {
+    let s = sweep(
+        3,
+        640,
+        512,
+        60,
+        Sensor::gain_preset(NoiseLevel::Typical),
+        ResponseCurve::Dorf(14),
+    );
+    // the first draw of pixels only: the growth stages start from it warm
+    let opts = ResponseOptions {
+        max_pixels: 1 << 15,
+        ..ResponseOptions::default()
+    };
+    let cal = calibrate_response(&mut frames(&s), &s.exposures_ms, &opts, &|_, _| {}).unwrap();
+    let (max, rms) = cal.response.errors_against(&s.response);
+    assert!(cal.restarted, "{:?} {max}", cal.stop);
+    assert!(
+        cal.converged && max < 5.0 && rms < 1.0,
+        "max {max} rms {rms}"
+    );
+}

@@ -400,6 +400,8 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
                 "knot_step": cal.knot_step,
                 "iterations": cal.iterations,
                 "converged": cal.converged,
+                "stop": cal.stop,
+                "restarted": cal.restarted,
                 "change": cal.change,
                 "rmse": cal.rmse,
                 "observed_min": cal.observed_range.0,
@@ -427,14 +429,8 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
         )?;
     } else {
         outln!(
-            "{} after {} iterations (last change {:.4} grey values); residual RMS {:.3} grey values",
-            if cal.converged {
-                "converged"
-            } else {
-                "stopped"
-            },
-            cal.iterations,
-            cal.change.last().copied().unwrap_or(f64::NAN),
+            "{}; residual RMS {:.3} grey values",
+            stop_line(cal.stop, cal.iterations, &cal.change, cal.restarted),
             cal.rmse
         )?;
         outln!("{}", weighting_line(&cal))?;
@@ -456,6 +452,47 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
 }
 
 /// The estimator, weights and prior used, and the held-out check that chose them.
+/// How the response fit's iteration ended, for the text output.
+fn stop_line(
+    stop: photometric::Stop,
+    iterations: usize,
+    change: &[f64],
+    restarted: bool,
+) -> String {
+    use photometric::Stop;
+    let last = change.last().copied().unwrap_or(f64::NAN);
+    let line = match stop {
+        Stop::Tolerance => {
+            format!("converged after {iterations} iterations (last change {last:.4} grey values)")
+        }
+        Stop::Settled => format!(
+            "converged after {iterations} iterations: what the iteration would still move lies \
+             within the standard errors (last change {last:.4} grey values)"
+        ),
+        Stop::NoImprovement => format!(
+            "converged after {iterations} iterations: no shorter step lowered the objective, so \
+             the last state that did is kept (the last step tried, taken back, moved U by \
+             {last:.4} grey values)"
+        ),
+        Stop::Flat => format!(
+            "converged after {iterations} iterations: the objective stopped falling (last change \
+             {last:.4} grey values)"
+        ),
+        Stop::Limit => format!(
+            "not converged: stopped at the iteration limit, {iterations} iterations (last change \
+             {last:.4} grey values)"
+        ),
+    };
+    if restarted {
+        format!(
+            "{line}; from the second start (U above grey value 245 continued as a quadratic in \
+             log U), after the first start's iteration ended where no step lowered the objective"
+        )
+    } else {
+        line
+    }
+}
+
 fn weighting_line(cal: &photometric::ResponseCalibration) -> String {
     let what = match cal.log_lambda {
         Some(lambda) => format!(

@@ -56,7 +56,7 @@ mod uncertainty;
 
 use camera_model::Image;
 
-pub use model::{Estimator, Weighting};
+pub use model::{Estimator, Stop, Weighting};
 pub use select::{CandidateScore, HeldOutScores};
 
 use crate::noise::{fit_noise, NoiseModel};
@@ -230,8 +230,14 @@ pub struct ResponseCalibration {
     pub systematic_error: Vec<f64>,
     /// Iterations run (all fits of the growing sample together).
     pub iterations: usize,
-    /// Whether the tolerance was reached.
+    /// Whether the iteration converged (stopped for any reason but the iteration limit).
     pub converged: bool,
+    /// Why the iteration stopped.
+    pub stop: Stop,
+    /// The fit comes from the second start, whose `U` above grey value 245 goes on as a
+    /// quadratic in `log U` (a strongly compressive response): the first start's iteration
+    /// ended where no step lowered the objective, and this one converged.
+    pub restarted: bool,
     /// Largest change of `U` (grey levels, `U(255) = 255`) in each iteration.
     pub change: Vec<f64>,
     /// Root-mean-square residual `I - G(t B')` of the values (not clipped), in grey levels.
@@ -415,6 +421,8 @@ struct Grown {
     iterations: usize,
     change: Vec<f64>,
     sampling_error: f64,
+    /// The fit comes from the steep start (the first did not converge).
+    restarted: bool,
 }
 
 /// The RMS sampling standard error over the determined knots (the ends, where few
@@ -452,26 +460,42 @@ fn fit_growing<T: Sample>(
     let mut start = Start::Cold;
     let mut iterations = 0;
     let mut change = Vec::new();
+    let mut restarted = false;
     loop {
         let p = Problem {
             samples: &samples,
             ..*base
         };
-        let offset = iterations;
-        let fit = solve(
-            &p,
-            start,
-            &Settings {
-                // the growth stages share the iteration budget
-                max_iterations: options.max_iterations.saturating_sub(iterations).max(1),
-                tolerance: options.tolerance,
-                tiles: true,
-                settle: true,
-                progress: &|i, d| progress(offset + i, d),
-            },
-        )?;
+        let cold = matches!(start, Start::Cold);
+        let run = |start: Start, done: usize| {
+            solve(
+                &p,
+                start,
+                &Settings {
+                    // the growth stages share the iteration budget
+                    max_iterations: options.max_iterations.saturating_sub(done).max(1),
+                    tolerance: options.tolerance,
+                    tiles: true,
+                    settle: true,
+                    progress: &|i, d| progress(done + i, d),
+                },
+            )
+        };
+        let mut fit = run(start, iterations)?;
         iterations += fit.iterations;
         change.extend_from_slice(&fit.change);
+        if cold && fit.stop == Stop::NoImprovement {
+            // a start far from the optimum can leave the iteration where no step helps (a
+            // strongly compressive response started too low at the top): the steep start's
+            // fit is taken when it converges properly
+            let steep = run(Start::ColdSteep, iterations)?;
+            iterations += steep.iterations;
+            change.extend_from_slice(&steep.change);
+            if matches!(steep.stop, Stop::Tolerance | Stop::Settled) {
+                fit = steep;
+                restarted = true;
+            }
+        }
         let se = sampling_error(&fit)?;
         if se <= options.target_std_error || n >= limit || iterations >= options.max_iterations {
             return Ok(Grown {
@@ -480,6 +504,7 @@ fn fit_growing<T: Sample>(
                 iterations,
                 change,
                 sampling_error: se,
+                restarted,
             });
         }
         // the error falls with the square root of the pixels
@@ -610,7 +635,9 @@ fn calibrate<T: Sample>(
         std_error,
         systematic_error: systematic,
         iterations: grown.iterations,
-        converged: fit.converged,
+        converged: fit.stop != Stop::Limit,
+        stop: fit.stop,
+        restarted: grown.restarted,
         change: grown.change,
         rmse,
         observed_range: (g_lo, g_hi),
@@ -897,7 +924,7 @@ fn check_range(
             distinct.len()
         ));
     }
-    if !fit.converged {
+    if fit.stop == Stop::Limit {
         warnings.push(format!(
             "not converged after {} iterations (last change {:.3} grey levels)",
             fit.iterations,

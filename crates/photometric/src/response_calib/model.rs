@@ -79,6 +79,23 @@ pub enum Weighting {
     Uniform,
 }
 
+/// Why the iteration of the response fit stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stop {
+    /// The step fell below the tolerance.
+    Tolerance,
+    /// What the iteration would still move lies within the standard errors.
+    Settled,
+    /// No shorter step lowered the objective any more: the last state that did is kept (the
+    /// steps tried then are in `change` but were taken back).
+    NoImprovement,
+    /// The objective stopped falling for several steps in a row.
+    Flat,
+    /// The iteration limit was reached first (not converged).
+    Limit,
+}
+
 /// Which estimator fits `U`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
