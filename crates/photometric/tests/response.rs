@@ -37,10 +37,15 @@ fn frames(s: &Sweep) -> Vec<Image<u8>> {
 }
 
 fn calibrate(s: &Sweep) -> ResponseCalibration {
+    calibrate_with(s, ResponseOptions::default())
+}
+
+/// [`calibrate`] with other options.
+fn calibrate_with(s: &Sweep, opts: ResponseOptions) -> ResponseCalibration {
     // JPEG frames are declared, as `monovo calib response` does for a JPEG sequence
     let opts = ResponseOptions {
         jpeg: s.sensor.jpeg_quality.is_some(),
-        ..ResponseOptions::default()
+        ..opts
     };
     calibrate_response(&mut frames(s), &s.exposures_ms, &opts, &|_, _| {}).unwrap()
 }
@@ -291,11 +296,13 @@ fn log_domain_estimator_recovers_the_response_and_its_bias() {
         Sensor::preset(NoiseLevel::Low),
         ResponseCurve::Dataset,
     );
-    let opts = ResponseOptions {
-        estimator: Estimator::Log,
-        ..ResponseOptions::default()
-    };
-    let cal = calibrate_response(&mut frames(&s), &s.exposures_ms, &opts, &|_, _| {}).unwrap();
+    let cal = calibrate_with(
+        &s,
+        ResponseOptions {
+            estimator: Estimator::Log,
+            ..ResponseOptions::default()
+        },
+    );
     assert_eq!(cal.estimator, Estimator::Log);
     let lambda = cal.log_lambda.unwrap();
     assert!([3.0, 10.0, 30.0].contains(&lambda), "{lambda}");
@@ -340,11 +347,13 @@ fn strongly_compressive_curve_is_found_from_the_second_start() {
         ResponseCurve::Dorf(14),
     );
     // the first draw of pixels only: the growth stages start from it warm
-    let opts = ResponseOptions {
-        max_pixels: 1 << 15,
-        ..ResponseOptions::default()
-    };
-    let cal = calibrate_response(&mut frames(&s), &s.exposures_ms, &opts, &|_, _| {}).unwrap();
+    let cal = calibrate_with(
+        &s,
+        ResponseOptions {
+            max_pixels: 1 << 15,
+            ..ResponseOptions::default()
+        },
+    );
     let (max, rms) = cal.response.errors_against(&s.response);
     assert!(cal.restarted, "{:?} {max}", cal.stop);
     assert!(

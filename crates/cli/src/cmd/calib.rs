@@ -451,7 +451,6 @@ fn run_response(a: &ResponseArgs) -> Result<()> {
     Ok(())
 }
 
-/// The estimator, weights and prior used, and the held-out check that chose them.
 /// How the response fit's iteration ended, for the text output.
 fn stop_line(
     stop: photometric::Stop,
@@ -493,6 +492,7 @@ fn stop_line(
     }
 }
 
+/// The estimator, weights and prior used, and the held-out check that chose them.
 fn weighting_line(cal: &photometric::ResponseCalibration) -> String {
     let what = match cal.log_lambda {
         Some(lambda) => format!(

@@ -483,19 +483,22 @@ fn fit_growing<T: Sample>(
         };
         let mut fit = run(start, iterations)?;
         iterations += fit.iterations;
-        change.extend_from_slice(&fit.change);
         if cold && fit.stop == Stop::NoImprovement {
             // a start far from the optimum can leave the iteration where no step helps (a
             // strongly compressive response started too low at the top): the steep start's
             // fit is taken when it converges properly
             let steep = run(Start::ColdSteep, iterations)?;
             iterations += steep.iterations;
-            change.extend_from_slice(&steep.change);
-            if matches!(steep.stop, Stop::Tolerance | Stop::Settled) {
-                fit = steep;
-                restarted = true;
-            }
+            restarted = matches!(steep.stop, Stop::Tolerance | Stop::Settled);
+            let dropped = if restarted {
+                std::mem::replace(&mut fit, steep)
+            } else {
+                steep
+            };
+            // every iteration run is in `change`, the kept fit's last
+            change.extend_from_slice(&dropped.change);
         }
+        change.extend_from_slice(&fit.change);
         let se = sampling_error(&fit)?;
         if se <= options.target_std_error || n >= limit || iterations >= options.max_iterations {
             return Ok(Grown {
