@@ -35,7 +35,14 @@ fn response_calibration_end_to_end_and_bad_sweeps() {
     assert_eq!(v["converged"], true);
     let stop = v["stop"].as_str().unwrap();
     assert!(
-        ["tolerance", "settled", "no_improvement", "flat"].contains(&stop),
+        [
+            "tolerance",
+            "settled",
+            "refused_within_noise",
+            "no_improvement",
+            "flat"
+        ]
+        .contains(&stop),
         "{stop}"
     );
     assert_eq!(v["std_error"].as_array().unwrap().len(), 256);

@@ -468,6 +468,11 @@ fn stop_line(
             "converged after {iterations} iterations: what the iteration would still move lies \
              within the standard errors (last change {last:.4} grey values)"
         ),
+        Stop::RefusedWithinNoise => format!(
+            "converged after {iterations} iterations: the last step tried made the objective \
+             worse and moved U within the standard errors, so the state before it is kept (the \
+             step, taken back, moved U by {last:.4} grey values)"
+        ),
         Stop::NoImprovement => format!(
             "converged after {iterations} iterations: no shorter step lowered the objective, so \
              the last state that did is kept (the last step tried, taken back, moved U by \

@@ -87,6 +87,11 @@ pub enum Stop {
     Tolerance,
     /// What the iteration would still move lies within the standard errors.
     Settled,
+    /// The last step tried made the objective worse and lay within the standard errors: the
+    /// state before it is kept (shorter steps cannot gain what the data resolve; the step is
+    /// last in `change` but was taken back). Only in the fits that start from an earlier one
+    /// (the growing sample's later stages).
+    RefusedWithinNoise,
     /// No shorter step lowered the objective any more: the last state that did is kept (the
     /// steps tried then are in `change` but were taken back).
     NoImprovement,
