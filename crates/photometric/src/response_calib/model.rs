@@ -6,15 +6,27 @@
 use super::samples::Levels;
 
 /// The forward response `G = U^-1` of a strictly increasing table, piecewise linear, with a
-/// lookup table over `sqrt(energy)` that makes each evaluation a few operations.
+/// lookup table over the leading bits of the energy (a logarithmic grid: [`LUT_BITS`] steps per
+/// octave) that gives each evaluation its segment's neighbourhood without a square root or a
+/// search.
 pub(super) struct Forward {
     pub u: Vec<f64>,
     pub inv_du: Vec<f64>,
     lut: Vec<u16>,
-    lut_scale: f64,
+    /// Energies up to this one share the first entry (segment 0).
+    floor: f64,
+    /// The leading bits of `floor`.
+    key_floor: u64,
 }
 
-const LUT_SIZE: usize = 4096;
+/// Steps per octave of the lookup table: `2^LUT_BITS`.
+const LUT_BITS: u32 = 9;
+
+/// Octaves below the top of the table the lookup table spans (below, the search starts at 0).
+const LUT_OCTAVES: i32 = 24;
+
+/// The bits of an `f64` below the lookup table's.
+const LUT_SHIFT: u32 = 52 - LUT_BITS;
 
 impl Forward {
     pub fn new(u: &[f64]) -> Forward {
@@ -24,12 +36,17 @@ impl Forward {
             inv_du[j] = 1.0 / (u[j + 1] - u[j]).max(1e-12);
         }
         inv_du[n - 1] = inv_du[n - 2];
-        let top = u[n - 1].max(1e-12);
-        let lut_scale = LUT_SIZE as f64 / top.sqrt();
-        let mut lut = vec![0u16; LUT_SIZE + 1];
+        let top = u[n - 1].max(1e-300);
+        let key_floor = (top * 2f64.powi(-LUT_OCTAVES)).to_bits() >> LUT_SHIFT;
+        let floor = f64::from_bits(key_floor << LUT_SHIFT);
+        let len = ((LUT_OCTAVES as usize + 1) << LUT_BITS) + 1;
+        let mut lut = vec![0u16; len];
         let mut j = 0usize;
-        for (b, slot) in lut.iter_mut().enumerate() {
-            let e = (b as f64 / lut_scale).powi(2);
+        // entry `b` covers the energies from `floor`'s key plus `b` up: its segment is the
+        // last whose start is at or below that key's smallest energy (entry 0: everything up
+        // to `floor`, from segment 0)
+        for (b, slot) in lut.iter_mut().enumerate().skip(1) {
+            let e = f64::from_bits((key_floor + b as u64) << LUT_SHIFT);
             while j < n - 2 && u[j + 1] <= e {
                 j += 1;
             }
@@ -39,14 +56,15 @@ impl Forward {
             u: u.to_vec(),
             inv_du,
             lut,
-            lut_scale,
+            floor,
+            key_floor,
         }
     }
 
     /// `(j, f)` with `G(e) = j + f` (in knots): `f` in `[0, 1)` inside `[U(0), U(top)]`, and
     /// the first or last segment continued linearly outside (so that a prediction beyond the
     /// table still has a slope that pulls it back).
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, e: f64) -> (usize, f64) {
         let n = self.u.len();
         if e.is_nan() || e < self.u[0] {
@@ -56,7 +74,11 @@ impl Forward {
             let j = n - 2;
             return (j, (e - self.u[j]) * self.inv_du[j]);
         }
-        let b = ((e.sqrt() * self.lut_scale) as usize).min(LUT_SIZE);
+        let b = if e > self.floor {
+            (((e.to_bits() >> LUT_SHIFT) - self.key_floor) as usize).min(self.lut.len() - 1)
+        } else {
+            0
+        };
         let mut j = self.lut[b] as usize;
         while j < n - 2 && self.u[j + 1] <= e {
             j += 1;
@@ -154,8 +176,8 @@ impl Noise {
 
     #[inline]
     pub fn at(&self, j: usize, f: f64) -> usize {
-        let k = if f < 0.5 { j } else { j + 1 };
-        k.min(self.sd.len() - 1)
+        // without a branch: `f` is as often below a half as above (NaN: the upper knot)
+        (j + usize::from(f >= 0.5 || f.is_nan())).min(self.sd.len() - 1)
     }
 }
 
@@ -213,8 +235,14 @@ pub(super) fn term(obs: Obs, mu: f64, sd: f64, ivar: f64, huber: f64) -> (f64, f
     match obs {
         Obs::Value(v) => {
             let r = v - mu;
-            let z = r.abs() / sd;
-            let w = if z > huber { ivar * huber / z } else { ivar };
+            // compared as `|r| > huber sd`: the division only for the few beyond (it
+            // stalled every observation's pass)
+            let a = r.abs();
+            let w = if a > huber * sd {
+                ivar * huber / (a / sd)
+            } else {
+                ivar
+            };
             (w, r)
         }
         Obs::Above(c) => censored((mu - c) / sd, sd, ivar, huber),
@@ -450,6 +478,64 @@ pub(super) fn expected_curvature(mu: f64, sd: f64, ivar: f64, lo: f64, hi: f64) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The segment a plain search over the table finds (`None` outside it).
+    fn searched(u: &[f64], e: f64) -> Option<(usize, f64)> {
+        let n = u.len();
+        if !(e >= u[0] && e < u[n - 1]) {
+            return None;
+        }
+        let j = (u.partition_point(|&x| x <= e) - 1).min(n - 2);
+        Some((j, ((e - u[j]) / (u[j + 1] - u[j])).clamp(0.0, 1.0)))
+    }
+
+    proptest::proptest! {
+        /// The lookup table only says where the search starts: on increasing tables of every
+        /// shape (steep at the start as a gamma curve, with tiny or negative first values,
+        /// 256 or 4096 knots) the segment is the one a plain search finds, at knots, between
+        /// them, at the ends and far below the table's top.
+        #[test]
+        fn the_forward_response_finds_the_segment_a_search_finds(
+            steps in proptest::collection::vec(0.01f64..1.0, 256..=4096),
+            start in proptest::prop_oneof![
+                1 => proptest::strategy::Just(0.0f64),
+                1 => -1.0f64..1.0,
+                1 => 0.0f64..1e-12,
+            ],
+            power in 1.0f64..4.0,
+            at in proptest::collection::vec(0.0f64..1.0, 64),
+        ) {
+            // a power of an increasing sequence: tiny first steps for the larger powers
+            let mut sum = 0.0;
+            let u: Vec<f64> = steps
+                .iter()
+                .map(|s| {
+                    sum += s;
+                    start + sum.powf(power)
+                })
+                .collect();
+            proptest::prop_assume!(u.windows(2).all(|w| w[1] - w[0] >= 1e-12));
+            let g = Forward::new(&u);
+            let n = u.len();
+            let mut energies: Vec<f64> = at
+                .iter()
+                .map(|a| u[0] + a * a * a * (u[n - 1] - u[0]))
+                .collect();
+            energies.extend(u.iter().copied());
+            energies.extend(u.iter().map(|x| x * (1.0 + 1e-15) + 1e-300));
+            energies.extend([g.floor, g.floor * 0.999, g.floor * 1.001, 0.0, -0.0]);
+            for e in energies {
+                let got = g.eval(e);
+                match searched(&u, e) {
+                    Some((j, f)) => {
+                        proptest::prop_assert_eq!(got.0, j, "energy {}", e);
+                        proptest::prop_assert!((got.1 - f).abs() <= 1e-9, "energy {}", e);
+                    }
+                    None => proptest::prop_assert!(got.0 == 0 || got.0 == n - 2),
+                }
+            }
+        }
+    }
 
     #[test]
     fn mills_ratio_matches_its_definition_and_tails() {

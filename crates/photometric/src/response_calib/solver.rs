@@ -541,9 +541,10 @@ fn profiled_hessian(p: &Problem<'_>, m: &Model<'_>, sums: &Sums) -> Vec<f64> {
             for a in lo..=hi {
                 let ga = g[a] / h;
                 if ga != 0.0 {
-                    let row = &mut hess[a * n..(a + 1) * n];
-                    for c in lo..=hi {
-                        row[c] -= ga * g[c];
+                    // (slices zipped: the loop vectorises)
+                    let row = &mut hess[a * n + lo..=a * n + hi];
+                    for (h, &gc) in row.iter_mut().zip(&g[lo..=hi]) {
+                        *h -= ga * gc;
                     }
                 }
             }
