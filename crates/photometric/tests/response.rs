@@ -3,6 +3,7 @@
 use camera_model::Image;
 use photometric::{
     calibrate_response, Estimator, PhotometricError, ResponseCalibration, ResponseOptions,
+    Weighting,
 };
 use synthetic::camera::ResponseCurve;
 use synthetic::scene::{Sweep, SweepConfig};
@@ -335,7 +336,9 @@ const LOG_MID_MAX: f64 = 1.0;
 /// where no step lowers the objective, 60 grey values off. The second start continues `U` as
 /// a quadratic in `log U`, converges, and is taken: 3.5 grey values, nearly all of it the top's
 /// scale (`U(255)`, the least determined value of such a curve), and within 1 after the best
-/// scale.
+/// scale. The weights are uniform, as the held-out check chose them on this sweep until uniform
+/// weights had to predict better by 1%: with the measured ones, which it keeps now, the first
+/// start converges (3.2 grey values off), and the second start would go untested.
 #[test]
 fn strongly_compressive_curve_is_found_from_the_second_start() {
     let s = sweep(
@@ -351,6 +354,7 @@ fn strongly_compressive_curve_is_found_from_the_second_start() {
         &s,
         ResponseOptions {
             max_pixels: 1 << 15,
+            weighting: Weighting::Uniform,
             ..ResponseOptions::default()
         },
     );

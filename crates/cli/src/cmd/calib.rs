@@ -50,7 +50,7 @@ in grey values, with Newton steps in which each pixel's B' is eliminated:
     the saturated values do not look like such a noise (a camera that clips below the top);
   - the noise variance per predicted grey value is measured from the residuals; --weighting
     auto (the default) weights by it unless uniform weights predict held-out exposures
-    better (the choice and both scores are printed), measured or uniform force one;
+    better by 1% (the choice and both scores are printed), measured or uniform force one;
   - residuals beyond --huber standard deviations pull with bounded force (moving objects,
     misregistration, hot pixels);
   - pixels are drawn at random until the sampling standard error of every determined U(k)
@@ -155,7 +155,7 @@ pub struct ResponseArgs {
     #[arg(long, value_name = "HOW", value_parser = parse_weighting, help = with_default(
         "How observations are weighted: by the noise measured from the residuals \
          (measured), alike (uniform), or auto: measured unless uniform weights predict \
-         held-out exposures better",
+         held-out exposures better by 1%",
         "auto",
     ))]
     pub weighting: Option<photometric::Weighting>,

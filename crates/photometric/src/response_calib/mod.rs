@@ -103,7 +103,7 @@ pub struct ResponseOptions {
     /// Grey values with fewer observations count as not determined by the data.
     pub min_count: u64,
     /// How observations are weighted: `auto` (by the measured noise unless uniform weights
-    /// predict held-out exposures better), `measured` (by the noise measured from the
+    /// predict held-out exposures better by 1%), `measured` (by the noise measured from the
     /// residuals) or `uniform`.
     pub weighting: Weighting,
     /// Let the held-out check also try a 10 and a 100 times weaker prior (taken only when it

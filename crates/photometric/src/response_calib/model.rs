@@ -92,7 +92,7 @@ impl Forward {
 #[serde(rename_all = "lowercase")]
 pub enum Weighting {
     /// Choose by the predictive score of held-out exposures (measured unless uniform predicts
-    /// them better).
+    /// them better by 1%).
     Auto,
     /// Each observation weighted by the inverse of the noise variance measured at its
     /// predicted grey value.

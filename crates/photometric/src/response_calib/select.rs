@@ -4,8 +4,9 @@
 //! frames through the fitted `U`: each pixel's irradiance from its other values by least
 //! squares, `B' = sum t U(I) / sum t^2` (the same for all, so that only `U` differs), then
 //! `G(t B')` against the value the camera recorded. Measured weights are kept unless uniform
-//! weights predict the held-out frames better; a weaker prior only when it predicts them
-//! clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
+//! weights predict the held-out frames clearly better (by [`UNIFORM_MARGIN`]: on long sweeps
+//! the two tie to 0.1%, and a tie keeps the weights of the model); a weaker prior only when it
+//! predicts them clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
 //! tie keeps the prior the ripples need).
 //!
 //! The log-domain fit (`logfit`) competes too: its candidates are refitted from scratch in
@@ -99,6 +100,9 @@ pub(super) const PRIOR_SCALES: [f64; 3] = [1.0, 0.1, 0.01];
 
 /// How much better (relative RMS) a weaker prior must predict to be chosen.
 const WEAKER_PRIOR_MARGIN: f64 = 0.01;
+
+/// How much better (relative RMS) uniform weights must predict to replace measured ones.
+const UNIFORM_MARGIN: f64 = 0.01;
 
 /// The fold of each frame: distinct exposures (relative tolerance 1e-6) in rank order.
 pub(super) fn folds(exposures: &[f64]) -> (Vec<usize>, usize) {
@@ -541,7 +545,9 @@ fn pick(cands: &[Choice], rms: &[f64], better_log: &dyn Fn(usize, usize) -> bool
                 None => grey = Some(c),
                 Some(g) => {
                     let weaker = cand.prior_scale < cands[g].prior_scale;
-                    let margin = if weaker { WEAKER_PRIOR_MARGIN } else { 0.0 };
+                    let unweighted = !cand.measured && cands[g].measured;
+                    let margin = if weaker { WEAKER_PRIOR_MARGIN } else { 0.0 }
+                        + if unweighted { UNIFORM_MARGIN } else { 0.0 };
                     if better(c, g, margin) {
                         grey = Some(c);
                     }
@@ -559,7 +565,41 @@ fn pick(cands: &[Choice], rms: &[f64], better_log: &dyn Fn(usize, usize) -> bool
 
 #[cfg(test)]
 mod tests {
-    use super::significantly_better;
+    use super::{pick, significantly_better, Choice, Estimator, PRIOR_SCALES};
+
+    /// The grey-domain candidates in the check's order (each prior: measured, uniform).
+    fn grey_candidates() -> Vec<Choice> {
+        PRIOR_SCALES
+            .iter()
+            .flat_map(|&prior_scale| {
+                [true, false].map(|measured| Choice {
+                    estimator: Estimator::Grey,
+                    measured,
+                    prior_scale,
+                    cold: false,
+                    all_values: false,
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn uniform_weights_and_a_weaker_prior_must_each_win_by_the_margin() {
+        let c = grey_candidates();
+        let never = |_: usize, _: usize| false;
+        // a tie, or uniform weights better by less than 1%: the measured ones stay
+        assert_eq!(pick(&c, &[1.0, 1.0, 1.0, 1.0, 1.0, 1.0], &never), 0);
+        assert_eq!(pick(&c, &[1.0, 0.995, 1.0, 0.995, 1.0, 0.995], &never), 0);
+        // better by 2%: uniform weights
+        assert_eq!(pick(&c, &[1.0, 0.98, 1.0, 1.0, 1.0, 1.0], &never), 1);
+        // once uniform weights are chosen, measured ones with the same prior need no margin
+        // to come back, a weaker prior needs its own
+        assert_eq!(pick(&c, &[1.0, 0.98, 0.979, 1.0, 1.0, 1.0], &never), 1);
+        assert_eq!(pick(&c, &[1.0, 0.98, 0.96, 1.0, 1.0, 1.0], &never), 2);
+        // uniform weights with a weaker prior against measured ones: both margins
+        assert_eq!(pick(&c, &[1.0, 1.0, 1.0, 0.985, 1.0, 1.0], &never), 0);
+        assert_eq!(pick(&c, &[1.0, 1.0, 1.0, 0.975, 1.0, 1.0], &never), 3);
+    }
 
     /// 400 pseudo-random residuals (uniform in -scale..scale) from `seed`.
     fn residuals(scale: f32, seed: u64) -> Vec<f32> {
