@@ -6,9 +6,9 @@
 use super::samples::Levels;
 
 /// The forward response `G = U^-1` of a strictly increasing table, piecewise linear, with a
-/// lookup table over the leading bits of the energy (a logarithmic grid: [`LUT_BITS`] steps per
-/// octave) that gives each evaluation its segment's neighbourhood without a square root or a
-/// search.
+/// lookup table over the leading bits of the energy (a logarithmic grid: `2^LUT_BITS` steps per
+/// octave) that starts each evaluation's search at most a knot or two below its segment,
+/// without a square root.
 pub(super) struct Forward {
     pub u: Vec<f64>,
     pub inv_du: Vec<f64>,
@@ -492,7 +492,7 @@ mod tests {
     proptest::proptest! {
         /// The lookup table only says where the search starts: on increasing tables of every
         /// shape (steep at the start as a gamma curve, with tiny or negative first values,
-        /// 256 or 4096 knots) the segment is the one a plain search finds, at knots, between
+        /// 256 to 4096 knots) the segment is the one a plain search finds, at knots, between
         /// them, at the ends and far below the table's top.
         #[test]
         fn the_forward_response_finds_the_segment_a_search_finds(

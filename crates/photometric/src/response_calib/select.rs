@@ -6,8 +6,8 @@
 //! `G(t B')` against the value the camera recorded. Measured weights are kept unless uniform
 //! weights predict the held-out frames clearly better (by [`UNIFORM_MARGIN`]: on long sweeps
 //! the two tie to 0.1%, and a tie keeps the weights of the model); a weaker prior only when it
-//! predicts them clearly better (a ripple the exposures leave undetermined is invisible to the check, so a
-//! tie keeps the prior the ripples need).
+//! predicts them clearly better (a ripple the exposures leave undetermined is invisible to the
+//! check, so a tie keeps the prior the ripples need).
 //!
 //! The log-domain fit (`logfit`) competes too: its candidates are refitted from scratch in
 //! every fold, and so is the chosen grey-domain candidate for the comparison (its fold fits
@@ -592,8 +592,8 @@ mod tests {
         assert_eq!(pick(&c, &[1.0, 0.995, 1.0, 0.995, 1.0, 0.995], &never), 0);
         // better by 2%: uniform weights
         assert_eq!(pick(&c, &[1.0, 0.98, 1.0, 1.0, 1.0, 1.0], &never), 1);
-        // once uniform weights are chosen, measured ones with the same prior need no margin
-        // to come back, a weaker prior needs its own
+        // once uniform weights are chosen, measured ones with a weaker prior need only the
+        // weaker prior's margin
         assert_eq!(pick(&c, &[1.0, 0.98, 0.979, 1.0, 1.0, 1.0], &never), 1);
         assert_eq!(pick(&c, &[1.0, 0.98, 0.96, 1.0, 1.0, 1.0], &never), 2);
         // uniform weights with a weaker prior against measured ones: both margins
